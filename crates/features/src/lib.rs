@@ -1,0 +1,1 @@
+//! Per-pixel local planes, derivatives and curvatures of a range image.

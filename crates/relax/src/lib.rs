@@ -1,0 +1,1 @@
+//! Cooperative relaxation of two edge sets by simulated annealing, and the final segmentation.

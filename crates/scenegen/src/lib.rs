@@ -1,0 +1,1 @@
+//! Deterministic ABW-like synthetic range scenes with ground truth.

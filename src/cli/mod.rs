@@ -1,0 +1,47 @@
+//! Subcommands of the `rangeseg` tool, one module each.
+
+mod edges;
+mod info;
+mod regions;
+mod render;
+mod score;
+mod segment;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Segment range images (depth images) into surfaces and edges.
+#[derive(Debug, Parser)]
+#[command(name = "rangeseg", version, about)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Print format, size, camera, valid fraction and value range of range files.
+    Info(info::Args),
+    /// Write a viewable PNG of a range file.
+    Render(render::Args),
+    /// Score a segmentation (and optionally an edge map) against ground truth.
+    Score(score::Args),
+    /// Detect edges with Canny on plane parameters (or raw depth).
+    Edges(edges::Args),
+    /// Segment by multi-seed region growing and write the regions and their borders C1.
+    Regions(regions::Args),
+    /// Run the whole pipeline: regions, edges, relaxation, final segmentation.
+    Segment(segment::Args),
+}
+
+/// Runs the parsed command line.
+pub(crate) fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Score(a) => score::run(a),
+        Command::Edges(a) => edges::run(a),
+        Command::Regions(a) => regions::run(a),
+        Command::Segment(a) => segment::run(a),
+    }
+}
