@@ -1,12 +1,325 @@
-//! `rangeseg score`.
+//! `rangeseg score`: Hoover region metrics, boundary P/R/F and the paper's precision.
 
+use anyhow::{Context, bail};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+
+/// Which labels of the segmentation are regions (see `eval::hoover::Convention`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum SegConvention {
+    /// ABW unless a label in 4..=9 appears, then every non-zero label.
+    Auto,
+    /// Labels ≥ 10 are regions (ABW).
+    Abw,
+    /// Every non-zero label is a region.
+    Nonzero,
+}
+
+impl From<SegConvention> for eval::Convention {
+    fn from(c: SegConvention) -> Self {
+        match c {
+            SegConvention::Auto => eval::Convention::Auto,
+            SegConvention::Abw => eval::Convention::Abw,
+            SegConvention::Nonzero => eval::Convention::NonZero,
+        }
+    }
+}
 
 /// Arguments of `rangeseg score`.
 #[derive(Debug, clap::Args)]
-pub(crate) struct Args {}
+pub(crate) struct Args {
+    /// Ground-truth labels (ABW `.gt-seg` Sun rasterfile).
+    #[arg(long, value_name = "GT.gt-seg")]
+    gt: PathBuf,
+    /// Machine segmentation (ABW `.ms-seg` Sun rasterfile).
+    #[arg(long, value_name = "SEG.ms-seg")]
+    seg: PathBuf,
+    /// Edge map PNG to score (else the segmentation's own region boundaries are scored).
+    #[arg(long, value_name = "EDGES.png")]
+    edges: Option<PathBuf>,
+    /// Angles between adjacent GT regions [default: GT.gt-ang beside the GT file, if present].
+    #[arg(long, value_name = "FILE")]
+    gt_ang: Option<PathBuf>,
+    /// Normals of the segmentation's regions [default: SEG.ms-nor beside the segmentation, if present].
+    #[arg(long, value_name = "FILE")]
+    seg_nor: Option<PathBuf>,
+    /// Reference edge PNG for the paper's precision (Eq. 7), e.g. C1; needs --edges.
+    #[arg(long, value_name = "REF.png")]
+    reference: Option<PathBuf>,
+    /// Edge matching tolerance in pixels (Euclidean, inclusive).
+    #[arg(long, default_value_t = 2.0)]
+    tolerance_px: f64,
+    /// Hoover tolerance T, in (0.5, 1].
+    #[arg(long, default_value_t = 0.8)]
+    hoover_t: f64,
+    /// Which labels of the segmentation are regions.
+    #[arg(long, value_enum, default_value_t = SegConvention::Auto)]
+    seg_convention: SegConvention,
+    /// Also compute the Hoover curve for T = 0.51 … 0.95.
+    #[arg(long)]
+    curve: bool,
+    /// Print exactly one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The files a score was computed from, echoed in the JSON output.
+#[derive(Debug, serde::Serialize)]
+struct Files {
+    gt: PathBuf,
+    seg: PathBuf,
+    edges: Option<PathBuf>,
+    reference: Option<PathBuf>,
+    gt_ang: Option<PathBuf>,
+    seg_nor: Option<PathBuf>,
+}
+
+/// The JSON document: the scores plus where they came from.
+#[derive(Debug, serde::Serialize)]
+struct Report<'a> {
+    #[serde(flatten)]
+    scores: &'a eval::Scores,
+    seg_convention: eval::Convention,
+    files: &'a Files,
+}
+
+/// `explicit` if given (it must exist), else `default` if that file exists.
+fn side_file(explicit: Option<&Path>, default: PathBuf) -> Option<PathBuf> {
+    match explicit {
+        Some(p) => Some(p.to_path_buf()),
+        None => default.is_file().then_some(default),
+    }
+}
+
+fn check_size<T, U>(
+    what: &str,
+    path: &Path,
+    img: &rangeimage::Grid<T>,
+    gt_path: &Path,
+    gt: &rangeimage::Grid<U>,
+) -> anyhow::Result<()> {
+    if !img.same_size(gt) {
+        bail!(
+            "{}: {what} is {}×{} but the ground truth {} is {}×{}",
+            path.display(),
+            img.width(),
+            img.height(),
+            gt_path.display(),
+            gt.width(),
+            gt.height()
+        );
+    }
+    Ok(())
+}
 
 /// Runs `rangeseg score`.
-pub(crate) fn run(_args: Args) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("`rangeseg score` is not implemented yet")
+pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let (scores, files, convention) = compute(&args)?;
+    if args.json {
+        let report = Report { scores: &scores, seg_convention: convention, files: &files };
+        let text = serde_json::to_string_pretty(&report).context("serialising the scores")?;
+        print_out(&text);
+    } else {
+        print_out(&render_text(&scores, &files, convention, args.tolerance_px));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Reads the inputs and computes the scores, the files used and the resolved MS convention.
+fn compute(args: &Args) -> anyhow::Result<(eval::Scores, Files, eval::Convention)> {
+    let params = eval::Params {
+        tolerance_px: args.tolerance_px,
+        hoover_t: args.hoover_t,
+        seg_convention: args.seg_convention.into(),
+        hoover_curve: args.curve,
+    };
+    if let Err(e) = params.validate() {
+        bail!("invalid option: {e}");
+    }
+    if args.reference.is_some() && args.edges.is_none() {
+        bail!("--reference needs --edges (the paper's precision scores an edge map against a reference)");
+    }
+    let gt = rangeio::abw::read_labels(&args.gt, true)?;
+    let seg = rangeio::abw::read_labels(&args.seg, false)?;
+    check_size("segmentation", &args.seg, &seg, &args.gt, &gt)?;
+    let edges = match &args.edges {
+        Some(p) => {
+            let e = rangeio::png::read_edge_png(p)?;
+            check_size("edge map", p, &e, &args.gt, &gt)?;
+            Some(e)
+        }
+        None => None,
+    };
+    let reference = match &args.reference {
+        Some(p) => {
+            let r = rangeio::png::read_edge_png(p)?;
+            check_size("reference edge map", p, &r, &args.gt, &gt)?;
+            Some(r)
+        }
+        None => None,
+    };
+    let gt_ang = side_file(args.gt_ang.as_deref(), args.gt.with_extension("gt-ang"));
+    let seg_nor = side_file(args.seg_nor.as_deref(), args.seg.with_extension("ms-nor"));
+    let angles: Option<Vec<(u32, u32, f64)>> = match &gt_ang {
+        Some(p) => Some(rangeio::abw::read_angles(p)?.into_iter().map(|a| (a.a, a.b, a.angle_deg)).collect()),
+        None => None,
+    };
+    let normals = match &seg_nor {
+        Some(p) => Some(rangeio::abw::read_normals(p)?),
+        None => None,
+    };
+    let inputs = eval::Inputs {
+        gt: &gt,
+        seg: Some(&seg),
+        edges: edges.as_ref(),
+        reference: reference.as_ref(),
+        gt_angles: angles.as_deref(),
+        seg_normals: normals.as_deref(),
+    };
+    let scores = eval::score(&inputs, &params);
+    let files = Files {
+        gt: args.gt.clone(),
+        seg: args.seg.clone(),
+        edges: args.edges.clone(),
+        reference: args.reference.clone(),
+        gt_ang,
+        seg_nor,
+    };
+    Ok((scores, files, params.seg_convention.resolve(&seg)))
+}
+
+/// Writes the report to standard output.
+#[allow(clippy::print_stdout)]
+fn print_out(text: &str) {
+    println!("{text}");
+}
+
+fn fmt_prf(p: &eval::Prf) -> String {
+    format!(
+        "P {:.4}  R {:.4}  F {:.4}  (detected {}/{}, GT {}/{})",
+        p.precision, p.recall, p.f, p.n_detected_matched, p.n_detected, p.n_gt_matched, p.n_gt
+    )
+}
+
+fn fmt_hoover(h: &eval::HooverScore) -> String {
+    format!(
+        "T {:.2}: GT regions {}, MS regions {}, correct {}, over {}, under {}, missed {}, noise {}",
+        h.t, h.gt_regions, h.seg_regions, h.correct, h.over, h.under, h.missed, h.noise
+    )
+}
+
+/// The human-readable report.
+fn render_text(s: &eval::Scores, files: &Files, convention: eval::Convention, tolerance_px: f64) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let na = |why: &str| format!("n/a ({why})");
+    let _ = writeln!(out, "ground truth   {}", files.gt.display());
+    let _ = writeln!(out, "segmentation   {} (convention {convention:?})", files.seg.display());
+    if let Some(h) = &s.hoover {
+        let _ = writeln!(out, "hoover         {}", fmt_hoover(h));
+        let angle = match (h.angle_error_deg, h.angle_error_std_deg) {
+            (Some(m), Some(sd)) => format!("{m:.2}° ± {sd:.2}° over {} adjacent pairs", h.angle_pairs),
+            _ if files.gt_ang.is_none() => na("no .gt-ang"),
+            _ if files.seg_nor.is_none() => na("no .ms-nor"),
+            _ => na("no correctly detected adjacent pair with normals"),
+        };
+        let _ = writeln!(out, "angle error    {angle}");
+    }
+    if let Some(curve) = &s.hoover_curve {
+        for h in curve {
+            let _ = writeln!(out, "  curve        {}", fmt_hoover(h));
+        }
+    }
+    match &s.boundary {
+        Some(b) => {
+            let source = match b.boundary_source {
+                eval::BoundarySource::Edges => "edge map",
+                eval::BoundarySource::Segmentation => "segmentation boundaries",
+            };
+            let _ = writeln!(out, "boundary       τ = {} px, scoring the {source}", b.tolerance_px);
+            let _ = writeln!(out, "  matched      {}", fmt_prf(&b.matched));
+            let _ = writeln!(out, "  simple       {}", fmt_prf(&b.simple));
+        }
+        None => {
+            let _ = writeln!(out, "boundary       {}", na("nothing to score"));
+        }
+    }
+    let pp = match (s.paper_precision, &files.edges, &files.reference) {
+        (Some(p), _, _) => format!("{p:.4} (τ = {tolerance_px} px)"),
+        (None, Some(_), Some(_)) => na("the edge map is empty"),
+        _ => na("needs --edges and --reference"),
+    };
+    let _ = write!(out, "paper precision {pp}");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Grid;
+
+    fn args(dir: &Path) -> Args {
+        Args {
+            gt: dir.join("a.gt-seg"),
+            seg: dir.join("a.ms-seg"),
+            edges: None,
+            gt_ang: None,
+            seg_nor: None,
+            reference: None,
+            tolerance_px: 2.0,
+            hoover_t: 0.8,
+            seg_convention: SegConvention::Auto,
+            curve: false,
+            json: true,
+        }
+    }
+
+    /// GT: 10 | 11 over a 24×16 image; MS: the same split one column to the right.
+    fn write_case(dir: &Path) {
+        std::fs::create_dir_all(dir).unwrap();
+        let gt = Grid::from_fn(24, 16, |x, _| if x < 12 { 10 } else { 11 });
+        let seg = Grid::from_fn(24, 16, |x, _| if x < 13 { 20 } else { 21 });
+        rangeio::abw::write_labels(&dir.join("a.gt-seg"), &gt).unwrap();
+        rangeio::abw::write_labels(&dir.join("a.ms-seg"), &seg).unwrap();
+        let ang = [rangeio::abw::AdjacentAngle { a: 10, b: 11, angle_deg: 90.0 }];
+        rangeio::abw::write_angles(&dir.join("a.gt-ang"), &ang).unwrap();
+        rangeio::abw::write_normals(&dir.join("a.ms-nor"), &[(20, [0.0, 0.0, 1.0]), (21, [1.0, 0.0, 1.0])])
+            .unwrap();
+        rangeio::png::write_edge_png(&dir.join("e.png"), &eval::boundary::gt_boundaries(&gt)).unwrap();
+        rangeio::png::write_edge_png(&dir.join("small.png"), &Grid::new(3, 3, false)).unwrap();
+    }
+
+    #[test]
+    fn scores_files_and_finds_side_files() {
+        let dir = std::env::temp_dir().join(format!("rangeseg-score-test-{}", std::process::id()));
+        write_case(&dir);
+        let (s, files, conv) = compute(&args(&dir)).unwrap();
+        assert_eq!(conv, eval::Convention::Abw);
+        assert_eq!(files.gt_ang.as_deref(), Some(dir.join("a.gt-ang").as_path()));
+        let h = s.hoover.as_ref().unwrap();
+        assert_eq!((h.correct, h.angle_pairs), (2, 1));
+        approx::assert_relative_eq!(h.angle_error_deg.unwrap(), 45.0, epsilon = 1e-4);
+        let b = s.boundary.as_ref().unwrap();
+        assert_eq!(b.boundary_source, eval::BoundarySource::Segmentation);
+        assert_eq!((b.matched.n_gt, b.matched.n_gt_matched), (32, 32));
+        let json = serde_json::to_value(Report { scores: &s, seg_convention: conv, files: &files }).unwrap();
+        assert_eq!(json["hoover"]["correct"], 2);
+        assert!(json["paper_precision"].is_null());
+        assert!(render_text(&s, &files, conv, 2.0).contains("n/a (needs --edges and --reference)"));
+
+        let with_edges =
+            Args { edges: Some(dir.join("e.png")), reference: Some(dir.join("e.png")), ..args(&dir) };
+        let (s, _, _) = compute(&with_edges).unwrap();
+        assert_eq!(s.boundary.unwrap().boundary_source, eval::BoundarySource::Edges);
+        assert_eq!(s.paper_precision, Some(1.0));
+
+        let bad = Args { edges: Some(dir.join("small.png")), ..args(&dir) };
+        let err = format!("{:#}", compute(&bad).unwrap_err());
+        assert!(err.contains("small.png") && err.contains("3×3"), "{err}");
+        let missing = Args { seg: dir.join("none.ms-seg"), ..args(&dir) };
+        assert!(format!("{:#}", compute(&missing).unwrap_err()).contains("none.ms-seg"));
+        let bad_t = Args { hoover_t: 0.3, ..args(&dir) };
+        assert!(format!("{:#}", compute(&bad_t).unwrap_err()).contains("hoover_t"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

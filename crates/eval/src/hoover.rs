@@ -1,0 +1,621 @@
+//! Hoover et al. (1996) region metrics, following the rules of the USF `compare` program.
+//!
+//! # Rules (tolerance `T`, `0.5 < T ≤ 1`)
+//! - **Regions.** GT regions are the labels ≥ 10 (ABW convention: 0..=3 unlabelled, 4..=9
+//!   illegal and ignored). Which labels of the machine segmentation (MS) are regions is set by
+//!   [`Convention`]: ABW (≥ 10), any non-zero label, or auto-detected ([`Convention::Auto`]).
+//! - **Sizes and overlaps.** `|R|` is the number of pixels carrying the region's label in its own
+//!   image (all of them, wherever the other image is unlabelled). The overlap table `O[m][n]` counts
+//!   the pixels labelled MS region `m` and GT region `n`, over all pixels.
+//! - **Correct detection** of GT `n` by MS `m`: `O ≥ T·|m|` and `O ≥ T·|n|`.
+//! - **Over-segmentation** of GT `n` into MS `m1..mx`, `x ≥ 2`: every `O[mi][n] ≥ T·|mi|` and
+//!   `Σ O[mi][n] ≥ T·|n|`. The set is all not-yet-classified MS regions with `O[m][n] ≥ T·|m|`.
+//! - **Under-segmentation** of MS `m` into GT `n1..nx`, `x ≥ 2`: every `O[m][ni] ≥ T·|ni|` and
+//!   `Σ O[m][ni] ≥ T·|m|`, the set again being all not-yet-classified candidates.
+//! - **Precedence.** A region belongs to at most one category. As in `compare`, all correct
+//!   detections are found first, then over-segmentations among the regions left, then
+//!   under-segmentations among the regions left; GT regions left are **missed**, MS regions left
+//!   are **noise**.
+//! - **Counts.** `correct` = correctly detected pairs; `over` = over-segmented GT regions (instances);
+//!   `under` = under-segmenting MS regions (instances); `missed` = GT regions; `noise` = MS regions.
+//! - **Angle error.** For every adjacent GT pair `(a, b, angle)` listed in the `.gt-ang` data whose
+//!   two regions are both correctly detected, by MS regions `ma ≠ mb` that both have a normal in the
+//!   `.ms-nor` data: `|angle − ∠(n_ma, n_mb)|`, with `∠` = `acos` of the normalised dot product in
+//!   degrees (normals as given, no sign flipping). Mean and population standard deviation over those
+//!   pairs, in list order; `None` when the data are missing or no pair qualifies.
+
+use crate::boundary::FIRST_REGION_LABEL;
+use rangeimage::LabelImage;
+use std::collections::HashMap;
+
+/// The values of T of Hoover et al.'s performance curves (0.51 to 0.95).
+pub const CURVE_TS: [f64; 10] = [0.51, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95];
+
+/// Which labels of a label image name regions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Convention {
+    /// ABW: labels ≥ 10 are regions, 0..=9 unlabelled.
+    Abw,
+    /// Every non-zero label is a region (in-memory segmentations from 1).
+    NonZero,
+    /// [`Convention::Abw`] unless some pixel carries a label in 4..=9, then [`Convention::NonZero`].
+    ///
+    /// Labels 4..=9 are illegal in the ABW convention (SPEC §2.1), so their presence means a
+    /// segmentation numbered from 1. ABW files may hold 1..=3 (unlabelled: noise, too small), so
+    /// those alone do not switch. A 1-based segmentation with at most 3 regions is therefore read
+    /// as ABW (all unlabelled): pass [`Convention::NonZero`] explicitly for such inputs.
+    #[default]
+    Auto,
+}
+
+impl Convention {
+    /// Resolves [`Convention::Auto`] for this image; the others are returned unchanged.
+    pub fn resolve(self, labels: &LabelImage) -> Convention {
+        match self {
+            Convention::Auto => {
+                if labels.as_slice().iter().any(|&l| (4..FIRST_REGION_LABEL).contains(&l)) {
+                    Convention::NonZero
+                } else {
+                    Convention::Abw
+                }
+            }
+            c => c,
+        }
+    }
+
+    /// True if `label` names a region under this (resolved) convention; `Auto` acts as `Abw`.
+    pub fn is_region(self, label: u32) -> bool {
+        match self {
+            Convention::NonZero => label != 0,
+            Convention::Abw | Convention::Auto => label >= FIRST_REGION_LABEL,
+        }
+    }
+}
+
+/// What happened to one region.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Category {
+    /// Part of a correct detection.
+    Correct,
+    /// Part of an over-segmentation instance (the GT region, or one of its pieces).
+    Over,
+    /// Part of an under-segmentation instance (the MS region, or one of the GT regions it covers).
+    Under,
+    /// GT region in no instance.
+    Missed,
+    /// MS region in no instance.
+    Noise,
+}
+
+/// The category of every region at one tolerance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Classification {
+    /// The tolerance T.
+    pub t: f64,
+    /// `(label, category)` of every GT region, by increasing label.
+    pub gt: Vec<(u32, Category)>,
+    /// `(label, category)` of every MS region, by increasing label.
+    pub seg: Vec<(u32, Category)>,
+    /// `(gt_label, seg_label)` of every correct detection, by increasing GT label.
+    pub correct_pairs: Vec<(u32, u32)>,
+}
+
+/// The Hoover et al. scores of one segmentation at one tolerance.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct HooverScore {
+    /// The tolerance T.
+    pub t: f64,
+    /// Number of GT regions.
+    pub gt_regions: u32,
+    /// Number of MS regions.
+    pub seg_regions: u32,
+    /// Correct detections.
+    pub correct: u32,
+    /// Over-segmented GT regions (instances).
+    pub over: u32,
+    /// Under-segmenting MS regions (instances).
+    pub under: u32,
+    /// Missed GT regions.
+    pub missed: u32,
+    /// Noise MS regions.
+    pub noise: u32,
+    /// MS regions taking part in over-segmentations.
+    pub over_seg_regions: u32,
+    /// GT regions taking part in under-segmentations.
+    pub under_gt_regions: u32,
+    /// Mean absolute angle error over qualifying adjacent pairs, in degrees.
+    pub angle_error_deg: Option<f64>,
+    /// Population standard deviation of the angle error, in degrees.
+    pub angle_error_std_deg: Option<f64>,
+    /// Number of adjacent pairs the angle error averages over.
+    pub angle_pairs: u32,
+}
+
+/// The overlap table between a GT and an MS label image, computed once for any number of T.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Overlap {
+    gt_labels: Vec<u32>,
+    gt_sizes: Vec<u64>,
+    seg_labels: Vec<u32>,
+    seg_sizes: Vec<u64>,
+    /// Per GT region: `(seg index, overlap)`, by seg index.
+    by_gt: Vec<Vec<(u32, u64)>>,
+    /// Per MS region: `(gt index, overlap)`, by GT index.
+    by_seg: Vec<Vec<(u32, u64)>>,
+}
+
+const NIL: u32 = u32::MAX;
+
+/// Sorted region labels, their sizes, and each pixel's region index (`NIL` if unlabelled).
+fn index_regions(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> (Vec<u32>, Vec<u64>, Vec<u32>) {
+    let px = labels.as_slice();
+    let max = px.iter().copied().filter(|&l| is_region(l)).max();
+    let Some(max) = max else { return (Vec::new(), Vec::new(), vec![NIL; px.len()]) };
+    let mut counts: HashMap<u32, u64> = HashMap::new();
+    let dense = max as usize <= 4 * px.len().max(1 << 16);
+    let mut dense_counts = if dense { vec![0u64; max as usize + 1] } else { Vec::new() };
+    for &l in px {
+        if is_region(l) {
+            if dense {
+                dense_counts[l as usize] += 1;
+            } else {
+                *counts.entry(l).or_default() += 1;
+            }
+        }
+    }
+    let mut pairs: Vec<(u32, u64)> = if dense {
+        dense_counts.iter().enumerate().filter(|&(_, &c)| c > 0).map(|(l, &c)| (l as u32, c)).collect()
+    } else {
+        counts.into_iter().collect()
+    };
+    pairs.sort_unstable();
+    let labels_sorted: Vec<u32> = pairs.iter().map(|p| p.0).collect();
+    let sizes = pairs.iter().map(|p| p.1).collect();
+    let index =
+        if dense {
+            let mut lut = vec![NIL; max as usize + 1];
+            for (i, &l) in labels_sorted.iter().enumerate() {
+                lut[l as usize] = i as u32;
+            }
+            px.iter().map(|&l| if is_region(l) { lut[l as usize] } else { NIL }).collect()
+        } else {
+            px.iter()
+                .map(|&l| {
+                    if is_region(l) { labels_sorted.binary_search(&l).map_or(NIL, |i| i as u32) } else { NIL }
+                })
+                .collect()
+        };
+    (labels_sorted, sizes, index)
+}
+
+impl Overlap {
+    /// Builds the overlap table; GT regions are labels ≥ 10, MS regions follow `seg_convention`.
+    ///
+    /// # Panics
+    /// If the images differ in size.
+    pub fn new(gt: &LabelImage, seg: &LabelImage, seg_convention: Convention) -> Self {
+        assert!(
+            gt.same_size(seg),
+            "GT {:?} and segmentation {:?} must have the same size",
+            gt.dimensions(),
+            seg.dimensions()
+        );
+        let conv = seg_convention.resolve(seg);
+        let (gt_labels, gt_sizes, gi) = index_regions(gt, |l| l >= FIRST_REGION_LABEL);
+        let (seg_labels, seg_sizes, si) = index_regions(seg, |l| conv.is_region(l));
+        // Count overlaps run by run (labels come in long horizontal runs), then sort.
+        let mut counts: HashMap<(u32, u32), u64> = HashMap::new();
+        let mut run: Option<((u32, u32), u64)> = None;
+        for (&g, &s) in gi.iter().zip(&si) {
+            let key = (g, s);
+            match &mut run {
+                Some((k, n)) if *k == key => *n += 1,
+                _ => {
+                    if let Some((k, n)) = run.take()
+                        && k.0 != NIL
+                        && k.1 != NIL
+                    {
+                        *counts.entry(k).or_default() += n;
+                    }
+                    run = Some((key, 1));
+                }
+            }
+        }
+        if let Some((k, n)) = run
+            && k.0 != NIL
+            && k.1 != NIL
+        {
+            *counts.entry(k).or_default() += n;
+        }
+        let mut triples: Vec<(u32, u32, u64)> = counts.into_iter().map(|((g, s), n)| (g, s, n)).collect();
+        triples.sort_unstable();
+        let mut by_gt = vec![Vec::new(); gt_labels.len()];
+        let mut by_seg = vec![Vec::new(); seg_labels.len()];
+        for &(g, s, n) in &triples {
+            by_gt[g as usize].push((s, n));
+            by_seg[s as usize].push((g, n));
+        }
+        Overlap { gt_labels, gt_sizes, seg_labels, seg_sizes, by_gt, by_seg }
+    }
+
+    /// GT region labels, increasing.
+    pub fn gt_labels(&self) -> &[u32] {
+        &self.gt_labels
+    }
+
+    /// MS region labels, increasing.
+    pub fn seg_labels(&self) -> &[u32] {
+        &self.seg_labels
+    }
+
+    /// Overlap in pixels between GT region `gt_label` and MS region `seg_label` (0 if either is absent).
+    pub fn overlap(&self, gt_label: u32, seg_label: u32) -> u64 {
+        let (Ok(g), Ok(s)) =
+            (self.gt_labels.binary_search(&gt_label), self.seg_labels.binary_search(&seg_label))
+        else {
+            return 0;
+        };
+        self.by_gt[g].iter().find(|e| e.0 as usize == s).map_or(0, |e| e.1)
+    }
+
+    /// Classifies every region at tolerance `t` (see the module rules).
+    ///
+    /// # Panics
+    /// If `t` is not in `(0.5, 1]`.
+    pub fn classify(&self, t: f64) -> Classification {
+        assert!(t > 0.5 && t <= 1.0, "Hoover tolerance T must be in (0.5, 1], got {t}");
+        let at_least = |o: u64, size: u64| o as f64 >= t * size as f64;
+        let mut gt_cat: Vec<Option<Category>> = vec![None; self.gt_labels.len()];
+        let mut seg_cat: Vec<Option<Category>> = vec![None; self.seg_labels.len()];
+        let mut correct_pairs = Vec::new();
+        for (g, row) in self.by_gt.iter().enumerate() {
+            for &(s, o) in row {
+                let s = s as usize;
+                if gt_cat[g].is_none()
+                    && seg_cat[s].is_none()
+                    && at_least(o, self.gt_sizes[g])
+                    && at_least(o, self.seg_sizes[s])
+                {
+                    gt_cat[g] = Some(Category::Correct);
+                    seg_cat[s] = Some(Category::Correct);
+                    correct_pairs.push((self.gt_labels[g], self.seg_labels[s]));
+                }
+            }
+        }
+        for (g, row) in self.by_gt.iter().enumerate() {
+            if gt_cat[g].is_some() {
+                continue;
+            }
+            let pieces: Vec<(usize, u64)> = row
+                .iter()
+                .map(|&(s, o)| (s as usize, o))
+                .filter(|&(s, o)| seg_cat[s].is_none() && at_least(o, self.seg_sizes[s]))
+                .collect();
+            let sum: u64 = pieces.iter().map(|p| p.1).sum();
+            if pieces.len() >= 2 && at_least(sum, self.gt_sizes[g]) {
+                gt_cat[g] = Some(Category::Over);
+                for &(s, _) in &pieces {
+                    seg_cat[s] = Some(Category::Over);
+                }
+            }
+        }
+        for (s, col) in self.by_seg.iter().enumerate() {
+            if seg_cat[s].is_some() {
+                continue;
+            }
+            let pieces: Vec<(usize, u64)> = col
+                .iter()
+                .map(|&(g, o)| (g as usize, o))
+                .filter(|&(g, o)| gt_cat[g].is_none() && at_least(o, self.gt_sizes[g]))
+                .collect();
+            let sum: u64 = pieces.iter().map(|p| p.1).sum();
+            if pieces.len() >= 2 && at_least(sum, self.seg_sizes[s]) {
+                seg_cat[s] = Some(Category::Under);
+                for &(g, _) in &pieces {
+                    gt_cat[g] = Some(Category::Under);
+                }
+            }
+        }
+        let gt =
+            self.gt_labels.iter().zip(&gt_cat).map(|(&l, c)| (l, c.unwrap_or(Category::Missed))).collect();
+        let seg =
+            self.seg_labels.iter().zip(&seg_cat).map(|(&l, c)| (l, c.unwrap_or(Category::Noise))).collect();
+        Classification { t, gt, seg, correct_pairs }
+    }
+
+    /// Scores at tolerance `t`, with the angle error when both angle lists are given.
+    ///
+    /// # Panics
+    /// If `t` is not in `(0.5, 1]`.
+    pub fn score(
+        &self,
+        t: f64,
+        gt_angles: Option<&[(u32, u32, f64)]>,
+        seg_normals: Option<&[(u32, [f32; 3])]>,
+    ) -> HooverScore {
+        let c = self.classify(t);
+        let count = |v: &[(u32, Category)], cat: Category| v.iter().filter(|e| e.1 == cat).count() as u32;
+        let under = count(&c.seg, Category::Under);
+        let over = count(&c.gt, Category::Over);
+        let mut errors = Vec::new();
+        if let (Some(angles), Some(normals)) = (gt_angles, seg_normals) {
+            // `correct_pairs` is sorted by GT label; normals: the first entry of a label wins.
+            let mut normal_of: HashMap<u32, [f32; 3]> = HashMap::new();
+            for &(l, n) in normals {
+                normal_of.entry(l).or_insert(n);
+            }
+            let seg_of =
+                |g: u32| c.correct_pairs.binary_search_by_key(&g, |p| p.0).ok().map(|i| c.correct_pairs[i].1);
+            for &(a, b, gt_angle) in angles {
+                let (Some(ma), Some(mb)) = (seg_of(a), seg_of(b)) else { continue };
+                let (Some(na), Some(nb)) = (normal_of.get(&ma), normal_of.get(&mb)) else { continue };
+                if ma == mb || !gt_angle.is_finite() {
+                    continue;
+                }
+                if let Some(ms_angle) = angle_deg(*na, *nb) {
+                    errors.push((gt_angle - ms_angle).abs());
+                }
+            }
+        }
+        let (mean, std) = if errors.is_empty() {
+            (None, None)
+        } else {
+            let n = errors.len() as f64;
+            let mean = errors.iter().sum::<f64>() / n;
+            let var = errors.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>() / n;
+            (Some(mean), Some(var.sqrt()))
+        };
+        HooverScore {
+            t,
+            gt_regions: self.gt_labels.len() as u32,
+            seg_regions: self.seg_labels.len() as u32,
+            correct: c.correct_pairs.len() as u32,
+            over,
+            under,
+            missed: count(&c.gt, Category::Missed),
+            noise: count(&c.seg, Category::Noise),
+            over_seg_regions: count(&c.seg, Category::Over),
+            under_gt_regions: count(&c.gt, Category::Under),
+            angle_error_deg: mean,
+            angle_error_std_deg: std,
+            angle_pairs: errors.len() as u32,
+        }
+    }
+}
+
+/// Angle between two vectors in degrees; `None` if either is zero or not finite.
+fn angle_deg(a: [f32; 3], b: [f32; 3]) -> Option<f64> {
+    let a = a.map(f64::from);
+    let b = b.map(f64::from);
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+    let c = dot / (na * nb);
+    (c.is_finite() && na > 0.0 && nb > 0.0).then(|| c.clamp(-1.0, 1.0).acos().to_degrees())
+}
+
+/// Hoover scores of `seg` against `gt` at tolerance `t` (MS convention auto-detected).
+///
+/// # Panics
+/// If the images differ in size or `t` is not in `(0.5, 1]`.
+pub fn compare(
+    gt: &LabelImage,
+    seg: &LabelImage,
+    t: f64,
+    gt_angles: Option<&[(u32, u32, f64)]>,
+    seg_normals: Option<&[(u32, [f32; 3])]>,
+) -> HooverScore {
+    compare_with(gt, seg, t, gt_angles, seg_normals, Convention::Auto)
+}
+
+/// [`compare`] with an explicit MS label convention.
+///
+/// # Panics
+/// If the images differ in size or `t` is not in `(0.5, 1]`.
+pub fn compare_with(
+    gt: &LabelImage,
+    seg: &LabelImage,
+    t: f64,
+    gt_angles: Option<&[(u32, u32, f64)]>,
+    seg_normals: Option<&[(u32, [f32; 3])]>,
+    seg_convention: Convention,
+) -> HooverScore {
+    let _s = tracing::info_span!("eval::hoover::compare").entered();
+    let score = Overlap::new(gt, seg, seg_convention).score(t, gt_angles, seg_normals);
+    tracing::debug!(?score, "hoover score");
+    score
+}
+
+/// Hoover scores at each tolerance in `ts` (e.g. [`CURVE_TS`]), without angle errors.
+///
+/// # Panics
+/// If the images differ in size or some `t` is not in `(0.5, 1]`.
+pub fn curve(gt: &LabelImage, seg: &LabelImage, ts: &[f64]) -> Vec<HooverScore> {
+    let _s = tracing::info_span!("eval::hoover::curve").entered();
+    let overlap = Overlap::new(gt, seg, Convention::Auto);
+    ts.iter().map(|&t| overlap.score(t, None, None)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use rangeimage::Grid;
+
+    fn img(rows: &[&[u32]]) -> LabelImage {
+        Grid::from_rows(rows.iter().map(|r| r.to_vec()).collect()).unwrap()
+    }
+
+    /// Expand each label of a small layout to a `k × k` block.
+    fn blocks(rows: &[&[u32]], k: u32) -> LabelImage {
+        let small = img(rows);
+        Grid::from_fn(small.width() * k, small.height() * k, |x, y| small[(x / k, y / k)])
+    }
+
+    fn counts(s: &HooverScore) -> [u32; 5] {
+        [s.correct, s.over, s.under, s.missed, s.noise]
+    }
+
+    #[test]
+    fn identical_is_all_correct() {
+        let gt = blocks(&[&[10, 10, 11], &[12, 0, 11], &[12, 13, 13]], 4);
+        let s = compare(&gt, &gt, 0.95, None, None);
+        assert_eq!((s.gt_regions, s.seg_regions), (4, 4));
+        assert_eq!(counts(&s), [4, 0, 0, 0, 0]);
+        assert_eq!(s.angle_error_deg, None);
+    }
+
+    #[test]
+    fn split_region_is_over_segmentation() {
+        // GT: 10 | 11 (4×4 blocks). MS: 11's area split into 21 (top) and 22 (bottom).
+        let gt = blocks(&[&[10, 11], &[10, 11]], 4);
+        let seg = blocks(&[&[20, 21], &[20, 22]], 4);
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [1, 1, 0, 0, 0]);
+        assert_eq!((s.over_seg_regions, s.under_gt_regions), (2, 0));
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.gt, vec![(10, Category::Correct), (11, Category::Over)]);
+        assert_eq!(c.correct_pairs, vec![(10, 20)]);
+    }
+
+    #[test]
+    fn merged_regions_are_under_segmentation() {
+        let gt = blocks(&[&[10, 11], &[12, 12]], 4);
+        let seg = blocks(&[&[30, 30], &[31, 31]], 4);
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [1, 0, 1, 0, 0]);
+        assert_eq!(s.under_gt_regions, 2);
+    }
+
+    #[test]
+    fn missed_and_noise() {
+        let gt = blocks(&[&[10, 10, 10, 10], &[10, 10, 10, 11], &[0, 0, 12, 12]], 4);
+        let seg = blocks(&[&[30, 30, 30, 30], &[30, 30, 30, 30], &[31, 31, 32, 32]], 4);
+        // |10| = 112, |11| = 16, |30| = 128, O(30,10) = 112 ≥ 0.8·128 = 102.4 and ≥ 0.8·112 → correct.
+        // 11 lies entirely in 30, which is already correct → missed. 31 lies on unlabelled GT → noise.
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [2, 0, 0, 1, 1]);
+        // At T = 0.9, 30 is no longer a correct detection of 10 (112 < 115.2): it under-segments
+        // 10 and 11 (both entirely inside it, sum 128 ≥ 115.2).
+        let s = compare(&gt, &seg, 0.9, None, None);
+        assert_eq!(counts(&s), [1, 0, 1, 0, 1]);
+    }
+
+    #[test]
+    fn thresholds_are_inclusive() {
+        // GT 10 = 10 px; MS 20 covers 8 of them and nothing else; 2 px of 10 are in MS 21.
+        let gt = img(&[&[10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 11, 11]]);
+        let seg = img(&[&[20, 20, 20, 20, 20, 20, 20, 20, 21, 21, 21, 21]]);
+        // O(20,10) = 8 = 0.8·10 and = 1.0·|20| → correct at T = 0.8 exactly, not at 0.81.
+        assert_eq!(compare(&gt, &seg, 0.8, None, None).correct, 1);
+        assert_eq!(compare(&gt, &seg, 0.81, None, None).correct, 0);
+    }
+
+    #[test]
+    fn auto_convention_detects_one_based_labels() {
+        let gt = blocks(&[&[10, 11, 12]], 3);
+        let seg_one = blocks(&[&[1, 2, 5]], 3);
+        let seg_abw = blocks(&[&[40, 50, 60]], 3);
+        assert_eq!(Convention::Auto.resolve(&seg_one), Convention::NonZero);
+        assert_eq!(compare(&gt, &seg_one, 0.8, None, None).correct, 3);
+        assert_eq!(compare(&gt, &seg_abw, 0.8, None, None).correct, 3);
+        // Forced ABW convention: labels 1, 2 and 5 are unlabelled, so every GT region is missed.
+        let s = compare_with(&gt, &seg_one, 0.8, None, None, Convention::Abw);
+        assert_eq!((s.seg_regions, s.missed), (0, 3));
+        // Only 1..=3: read as ABW unless told otherwise.
+        let seg_123 = blocks(&[&[1, 2, 3]], 3);
+        assert_eq!(compare(&gt, &seg_123, 0.8, None, None).seg_regions, 0);
+        assert_eq!(compare_with(&gt, &seg_123, 0.8, None, None, Convention::NonZero).correct, 3);
+    }
+
+    #[test]
+    fn angle_error_by_hand() {
+        let gt = blocks(&[&[10, 11, 12]], 4);
+        let seg = blocks(&[&[20, 21, 22]], 4);
+        let angles = [(10, 11, 90.0), (11, 12, 45.0), (10, 99, 30.0)];
+        // 20 ⟂ 21 exactly (error 0); 21 and 22 at 60° (error 15). The pair with 99 is skipped.
+        let s60 = [0.5f32, 0.0, 3f32.sqrt() / 2.0];
+        let normals = [(20, [0.0f32, 0.0, 1.0]), (21, [1.0, 0.0, 0.0]), (22, s60)];
+        let s = compare(&gt, &seg, 0.8, Some(&angles), Some(&normals));
+        assert_eq!(s.angle_pairs, 2);
+        assert_relative_eq!(s.angle_error_deg.unwrap(), 7.5, epsilon = 1e-5);
+        assert_relative_eq!(s.angle_error_std_deg.unwrap(), 7.5, epsilon = 1e-5);
+        // Without normals there is no angle error.
+        assert_eq!(compare(&gt, &seg, 0.8, Some(&angles), None).angle_error_deg, None);
+        // A missing normal drops the pair.
+        let s = compare(&gt, &seg, 0.8, Some(&angles), Some(&normals[..2]));
+        assert_eq!(s.angle_pairs, 1);
+        assert_relative_eq!(s.angle_error_deg.unwrap(), 0.0, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn curve_is_monotone_in_correct_detections_here() {
+        let gt = blocks(&[&[10, 10, 11], &[12, 12, 11]], 5);
+        let mut seg = gt.clone();
+        // Move a few pixels of 11 into 12 so T decides.
+        for y in 5..10 {
+            seg[(10, y)] = 12;
+        }
+        let c = curve(&gt, &seg, &CURVE_TS);
+        assert_eq!(c.len(), CURVE_TS.len());
+        assert!(c.windows(2).all(|w| w[0].correct >= w[1].correct));
+        assert_eq!(c[0].correct, 3);
+        assert!(c.last().unwrap().correct < 3);
+    }
+
+    mod proptests {
+        use super::*;
+        use crate::testing::{abw_labels, relabel};
+        use proptest::prelude::*;
+
+        proptest! {
+            #[test]
+            fn proptest_gt_against_itself_is_all_correct(gt in abw_labels(1..24, 1..24, 8), t in 0.51f64..1.0) {
+                let s = compare(&gt, &gt, t, None, None);
+                prop_assert_eq!(s.correct, s.gt_regions);
+                prop_assert_eq!(s.correct, s.seg_regions);
+                prop_assert_eq!([s.over, s.under, s.missed, s.noise], [0, 0, 0, 0]);
+            }
+
+            #[test]
+            fn proptest_every_region_in_one_category(
+                gt in abw_labels(8..9, 8..9, 5),
+                seg in abw_labels(8..9, 8..9, 5),
+                t in 0.51f64..1.0,
+            ) {
+                let c = Overlap::new(&gt, &seg, Convention::Abw).classify(t);
+                let s = Overlap::new(&gt, &seg, Convention::Abw).score(t, None, None);
+                prop_assert_eq!(c.gt.len() as u32, s.gt_regions);
+                prop_assert_eq!(s.correct + s.over + s.under_gt_regions + s.missed, s.gt_regions);
+                prop_assert_eq!(s.correct + s.over_seg_regions + s.under + s.noise, s.seg_regions);
+            }
+
+            #[test]
+            fn proptest_relabelling_changes_nothing(
+                gt in abw_labels(6..12, 6..12, 4),
+                seed in any::<u64>(),
+                t in 0.51f64..1.0,
+            ) {
+                // A segmentation made from the GT by merging and shuffling, so all categories occur.
+                let seg = gt.map(|&l| if l >= 10 { 10 + (l * 7 + (seed as u32 % 5)) % 4 } else { l });
+                let normals: Vec<(u32, [f32; 3])> =
+                    (10..14).map(|l| (l, [l as f32, 1.0, (l % 3) as f32])).collect();
+                let angles = [(10, 11, 30.0), (11, 12, 80.0), (12, 13, 10.0)];
+                let base = compare(&gt, &seg, t, Some(&angles), Some(&normals));
+                let (seg2, map) = relabel(&seg, seed, |l| l >= 10, 10);
+                let new_label = |l: u32| map.get(&l).copied().unwrap_or(100_000 + l);
+                let normals2: Vec<(u32, [f32; 3])> = normals.iter().map(|&(l, n)| (new_label(l), n)).collect();
+                let other = compare(&gt, &seg2, t, Some(&angles), Some(&normals2));
+                prop_assert_eq!(&base, &other);
+                // The same with 1-based labels and the non-zero convention.
+                let seg0 = seg.map(|&l| if l >= 10 { l } else { 0 });
+                let (seg3, _) = relabel(&seg0, seed ^ 0x5555, |l| l != 0, 1);
+                let plain = compare_with(&gt, &seg0, t, None, None, Convention::NonZero);
+                let third = compare_with(&gt, &seg3, t, None, None, Convention::NonZero);
+                prop_assert_eq!(plain, third);
+            }
+        }
+    }
+}
