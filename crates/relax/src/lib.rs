@@ -1,1 +1,610 @@
 //! Cooperative relaxation of two edge sets by simulated annealing, and the final segmentation.
+//!
+//! SPEC §3.4. [`relax`] takes the region borders C1 (with a per-pixel strength s1, e.g. |K| or
+//! curvedness) and the Canny edges C2 (with the gradient magnitude), removes the points of each
+//! set that the other does not support ([`prune`]), then minimises
+//! `E = Eⁱ + λ·Eᵉ` by simulated annealing over one-pixel moves of single points:
+//!
+//! - `Eⁱ = Σ_{p∈C1} min(d(p, C2), cap)` with `cap = t_d_px + 1` pixels (see below);
+//! - `Eᵉ = A + B − Σ_{p∈C1} s1(p) − Σ_{q∈C2} |∇q|`, with A, B the same sums over the pruned
+//!   initial sets, so `Eᵉ = 0` at the start.
+//!
+//! **Distance cap.** After pruning every C1 point lies within `t_d_px` of C2, but annealing can
+//! move points apart. The nearest-C2 distance of a C1 point is searched only within the disk of
+//! radius `cap = t_d_px + 1`; a C1 point with no C2 point at squared distance `≤ ⌊cap²⌋`
+//! contributes exactly `cap`. [`energy`] (full recomputation) uses the same definition, so the
+//! incremental bookkeeping and a full recomputation agree up to float rounding.
+//!
+//! **Scaling** (the paper is silent): with `normalize = true` (default), s1 and |∇| are divided
+//! by their means over the pruned initial C1 and C2 respectively, so λ is unitless and the same
+//! value works for |K|, curvedness, or any gradient unit. Non-finite s1/|∇| values count as 0.
+//!
+//! **Annealing.** A move picks a uniformly random point of C1 ∪ C2 and a uniformly random
+//! 8-neighbour; it is rejected (counted as tried, not accepted) if the target is outside the
+//! image, invalid, or occupied by a point of the same set. Metropolis acceptance: `ΔE < 0` or
+//! `u < exp(−ΔE/T)` (so ΔE = 0 moves are always accepted). `T ← (1 − δ)·T` after every sweep of
+//! `|C1 ∪ C2|` attempts. If `t0 = 0` the initial temperature is automatic: the mean positive ΔE
+//! of `min(|C1 ∪ C2|, 1000)` trial moves (evaluated, never applied) divided by
+//! `ln(1 / auto_t0_acceptance)`, so an average uphill move is accepted with probability
+//! `auto_t0_acceptance` at the start (default 1%: the relaxation is a local refinement of two
+//! nearly aligned sets, and hotter starts measured worse energies). Stop after a sweep whose
+//! acceptance rate is below `min_acceptance`, or after `max_sweeps` sweeps.
+//!
+//! **Returned state.** The lowest-energy state among the initial (pruned) state and the states
+//! at the end of each sweep; its energy is then recomputed from scratch and, should rounding
+//! make it exceed the initial energy, the initial state is returned. So `energy_after ≤
+//! energy_before` always.
+
+mod anneal;
+mod edt;
+mod segment;
+
+pub use segment::{SegmentParams, final_segmentation};
+
+use anneal::{DistanceTerm, NONE, State};
+use rand::SeedableRng;
+use rangeimage::{EdgeMap, Grid};
+
+/// The `[relax]` table: pruning distance, energy weight and annealing schedule.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// T_d: points of one set farther than this from the other set are removed (pixels).
+    pub t_d_px: f64,
+    /// λ, the weight of the external (edge strength) energy against the distance energy.
+    pub lambda: f64,
+    /// Initial temperature; 0 = automatic (see `auto_t0_acceptance`).
+    pub t0: f64,
+    /// With `t0 = 0`: T0 is set so that a move with the mean uphill ΔE of a trial batch is
+    /// accepted with this probability, `T0 = mean⁺ / ln(1 / p)`. In (0, 1).
+    pub auto_t0_acceptance: f64,
+    /// δ in the geometric cooling `T ← (1 − δ)·T` per sweep, in (0, 1).
+    pub cooling_delta: f64,
+    /// Stop after a sweep whose fraction of accepted moves is below this.
+    pub min_acceptance: f64,
+    /// Upper bound on the number of sweeps (0 = prune only).
+    pub max_sweeps: u32,
+    /// Divide s1 and |∇| by their means over the initial sets (λ becomes unitless).
+    pub normalize: bool,
+}
+
+/// Defaults: `t_d_px` and `lambda` were picked on the synthetic training split
+/// (`examples/relax_eval.rs --tune`, objective: mean boundary F of C at τ = 2); the schedule
+/// on the 512×512 bench case (lowest energy within the time budget).
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            t_d_px: 4.0,
+            lambda: 0.3,
+            t0: 0.0,
+            auto_t0_acceptance: 0.01,
+            cooling_delta: 0.3,
+            min_acceptance: 0.05,
+            max_sweeps: 20,
+            normalize: true,
+        }
+    }
+}
+
+impl Params {
+    /// Checks the values; the error names the offending field.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.t_d_px.is_finite() && (0.0..=64.0).contains(&self.t_d_px)) {
+            return Err(format!("relax.t_d_px must be in 0..=64, got {}", self.t_d_px));
+        }
+        if !(self.lambda.is_finite() && self.lambda >= 0.0) {
+            return Err(format!("relax.lambda must be finite and ≥ 0, got {}", self.lambda));
+        }
+        if !(self.t0.is_finite() && self.t0 >= 0.0) {
+            return Err(format!("relax.t0 must be finite and ≥ 0 (0 = automatic), got {}", self.t0));
+        }
+        if !(self.auto_t0_acceptance > 0.0 && self.auto_t0_acceptance < 1.0) {
+            return Err(format!(
+                "relax.auto_t0_acceptance must be in (0, 1), got {}",
+                self.auto_t0_acceptance
+            ));
+        }
+        if !(self.cooling_delta > 0.0 && self.cooling_delta < 1.0) {
+            return Err(format!("relax.cooling_delta must be in (0, 1), got {}", self.cooling_delta));
+        }
+        if !(0.0..=1.0).contains(&self.min_acceptance) {
+            return Err(format!("relax.min_acceptance must be in 0..=1, got {}", self.min_acceptance));
+        }
+        Ok(())
+    }
+
+    /// The distance cap of the internal energy, `t_d_px + 1` pixels (see the crate docs).
+    pub fn distance_cap_px(&self) -> f64 {
+        self.t_d_px + 1.0
+    }
+}
+
+/// The relaxed edge sets.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Relaxed {
+    /// Pruned and relaxed region borders.
+    pub c1: EdgeMap,
+    /// Pruned and relaxed Canny edges.
+    pub c2: EdgeMap,
+    /// The final edge map C = C1 ∪ C2.
+    pub edges: EdgeMap,
+}
+
+/// Diagnostics of one [`relax`] run. Energies are in the (normalised) units of the crate docs.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Info {
+    /// C1 points removed by pruning.
+    pub removed_c1: u32,
+    /// C2 points removed by pruning.
+    pub removed_c2: u32,
+    /// E of the pruned initial state.
+    pub energy_before: f64,
+    /// E of the returned state (≤ `energy_before`).
+    pub energy_after: f64,
+    /// Eⁱ of the pruned initial state.
+    pub e_internal_before: f64,
+    /// Eⁱ of the returned state.
+    pub e_internal_after: f64,
+    /// Eᵉ of the pruned initial state (0 by construction).
+    pub e_external_before: f64,
+    /// Eᵉ of the returned state.
+    pub e_external_after: f64,
+    /// Initial temperature used.
+    pub t0: f64,
+    /// Sweeps run.
+    pub sweeps: u32,
+    /// Move attempts, including those rejected as invalid or occupied.
+    pub moves_tried: u64,
+    /// Accepted moves.
+    pub moves_accepted: u64,
+    /// `moves_accepted / moves_tried` (0 if nothing was tried).
+    pub acceptance_rate: f64,
+}
+
+/// The energy of a configuration, split into its terms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Energy {
+    /// Eⁱ, the capped distance sum.
+    pub internal: f64,
+    /// Eᵉ = A + B − Σ s1 − Σ |∇|.
+    pub external: f64,
+    /// E = Eⁱ + λ·Eᵉ.
+    pub total: f64,
+}
+
+/// Removes unsupported edges (SPEC §3.4 step 1): every C2 point farther than `t_d_px` from C1,
+/// then every C1 point farther than `t_d_px` from the pruned C2. Exact Euclidean distances.
+///
+/// # Panics
+/// If the maps differ in size.
+pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
+    assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
+    let t2 = t_d_px * t_d_px;
+    let d1 = edt::squared_edt(c1);
+    let mut p2 = c2.clone();
+    for (e, &d) in p2.as_mut_slice().iter_mut().zip(d1.as_slice()) {
+        *e = *e && d <= t2;
+    }
+    let d2 = edt::squared_edt(&p2);
+    let mut p1 = c1.clone();
+    for (e, &d) in p1.as_mut_slice().iter_mut().zip(d2.as_slice()) {
+        *e = *e && d <= t2;
+    }
+    (p1, p2)
+}
+
+/// `values` as f64 with non-finite values set to 0, divided by their mean over `set` if
+/// `normalize` and that mean is positive.
+fn scaled(values: &Grid<f32>, set: &EdgeMap, normalize: bool) -> Grid<f64> {
+    let mut g = values.map(|&v| if v.is_finite() { f64::from(v) } else { 0.0 });
+    // Values are rounded to f32 after scaling, so the annealing state can store them in f32
+    // with exactly the values this function returns.
+    if normalize {
+        let (mut sum, mut n) = (0.0f64, 0u64);
+        for (&v, &e) in g.as_slice().iter().zip(set.as_slice()) {
+            if e {
+                sum += v;
+                n += 1;
+            }
+        }
+        let mean = if n > 0 { sum / n as f64 } else { 0.0 };
+        if mean > 0.0 && mean.is_finite() {
+            for v in g.as_mut_slice() {
+                *v = f64::from((*v / mean) as f32);
+            }
+        }
+    }
+    g
+}
+
+/// Σ s1 over `c1` then Σ |∇| over `c2`, raster order, one accumulator.
+fn external_sum(c1: &EdgeMap, s1: &Grid<f64>, c2: &EdgeMap, mag: &Grid<f64>) -> f64 {
+    let mut sum = 0.0;
+    for (&e, &v) in c1.as_slice().iter().zip(s1.as_slice()) {
+        if e {
+            sum += v;
+        }
+    }
+    for (&e, &v) in c2.as_slice().iter().zip(mag.as_slice()) {
+        if e {
+            sum += v;
+        }
+    }
+    sum
+}
+
+/// Full recomputation of E for the configuration (`c1`, `c2`) relative to the initial sets
+/// (`c1_initial`, `c2_initial`, which define A, B and the normalisation), with exactly the
+/// definitions [`relax`] uses (distance cap, scaling). For tests and diagnostics: O(pixels).
+///
+/// # Panics
+/// If the grids differ in size.
+pub fn energy(
+    c1: &EdgeMap,
+    s1: &Grid<f32>,
+    c2: &EdgeMap,
+    magnitude: &Grid<f32>,
+    c1_initial: &EdgeMap,
+    c2_initial: &EdgeMap,
+    params: &Params,
+) -> Energy {
+    for (name, ok) in [
+        ("s1", c1.same_size(s1)),
+        ("c2", c1.same_size(c2)),
+        ("magnitude", c1.same_size(magnitude)),
+        ("c1_initial", c1.same_size(c1_initial)),
+        ("c2_initial", c1.same_size(c2_initial)),
+    ] {
+        assert!(ok, "relax::energy: {name} differs in size from c1");
+    }
+    let s1n = scaled(s1, c1_initial, params.normalize);
+    let magn = scaled(magnitude, c2_initial, params.normalize);
+    let ab = external_sum(c1_initial, &s1n, c2_initial, &magn);
+    let term = DistanceTerm::new(params.distance_cap_px());
+    let d = edt::squared_edt(c2);
+    let mut internal = 0.0;
+    for (&e, &d2) in c1.as_slice().iter().zip(d.as_slice()) {
+        if e {
+            internal += term.value(if d2 <= f64::from(term.cap2) { d2 as u32 } else { NONE });
+        }
+    }
+    let external = ab - external_sum(c1, &s1n, c2, &magn);
+    Energy { internal, external, total: internal + params.lambda * external }
+}
+
+/// Prunes and relaxes C1 (region borders, strength `s1`) and C2 (Canny edges, strength
+/// `magnitude`) by simulated annealing (SPEC §3.4 steps 1–3; details in the crate docs).
+/// Deterministic for a given `seed`; single-threaded.
+///
+/// # Panics
+/// If the grids differ in size or `params` is invalid.
+pub fn relax(
+    c1: &EdgeMap,
+    s1: &Grid<f32>,
+    c2: &EdgeMap,
+    magnitude: &Grid<f32>,
+    valid: &Grid<bool>,
+    params: &Params,
+    seed: u64,
+) -> (Relaxed, Info) {
+    let _s = tracing::info_span!("relax", w = c1.width(), h = c1.height()).entered();
+    for (name, ok) in [
+        ("s1", c1.same_size(s1)),
+        ("c2", c1.same_size(c2)),
+        ("magnitude", c1.same_size(magnitude)),
+        ("valid", c1.same_size(valid)),
+    ] {
+        assert!(ok, "relax::relax: {name} differs in size from c1");
+    }
+    if let Err(e) = params.validate() {
+        panic!("relax::relax: invalid params: {e}");
+    }
+    let count = |m: &EdgeMap| m.as_slice().iter().filter(|&&b| b).count() as u32;
+    let (p1, p2) = prune(c1, c2, params.t_d_px);
+    let mut info =
+        Info { removed_c1: count(c1) - count(&p1), removed_c2: count(c2) - count(&p2), ..Info::default() };
+    tracing::debug!(removed_c1 = info.removed_c1, removed_c2 = info.removed_c2, "pruned");
+    let s1n = scaled(s1, &p1, params.normalize);
+    let magn = scaled(magnitude, &p2, params.normalize);
+    let ab = external_sum(&p1, &s1n, &p2, &magn);
+    let term = DistanceTerm::new(params.distance_cap_px());
+    let mut st = State::new(&p1, &p2, &s1n, &magn, valid, term, params.lambda, ab);
+    let initial = st.pos.clone();
+    let (ei0, ee0) = st.recompute_at(&initial);
+    let e0 = ei0 + params.lambda * ee0;
+    info.energy_before = e0;
+    info.e_internal_before = ei0;
+    info.e_external_before = ee0;
+
+    let n = st.len();
+    let mut best = initial.clone();
+    if n > 0 && params.max_sweeps > 0 {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
+        let t0 = if params.t0 > 0.0 {
+            params.t0
+        } else {
+            st.mean_uphill(&mut rng, n.min(1000)).map_or(1e-9, |m| m / (1.0 / params.auto_t0_acceptance).ln())
+        };
+        info.t0 = t0;
+        let mut t = t0;
+        let mut best_e = st.energy();
+        for _ in 0..params.max_sweeps {
+            let mut acc = 0u64;
+            for _ in 0..n {
+                acc += u64::from(st.step(&mut rng, t));
+            }
+            info.sweeps += 1;
+            info.moves_tried += n as u64;
+            info.moves_accepted += acc;
+            let e = st.energy();
+            tracing::trace!(sweep = info.sweeps, t, e, acceptance = acc as f64 / n as f64, "sweep");
+            if e < best_e {
+                best_e = e;
+                best.clone_from(&st.pos);
+            }
+            t *= 1.0 - params.cooling_delta;
+            if (acc as f64) < params.min_acceptance * n as f64 {
+                break;
+            }
+        }
+    }
+    let (mut ei1, mut ee1) = st.recompute_at(&best);
+    if ei1 + params.lambda * ee1 > e0 {
+        best = initial;
+        (ei1, ee1) = (ei0, ee0);
+    }
+    info.energy_after = ei1 + params.lambda * ee1;
+    info.e_internal_after = ei1;
+    info.e_external_after = ee1;
+    info.acceptance_rate =
+        if info.moves_tried > 0 { info.moves_accepted as f64 / info.moves_tried as f64 } else { 0.0 };
+    tracing::debug!(?info, "relaxed");
+    let (r1, r2) = st.maps(&best);
+    let edges = Grid::from_fn(r1.width(), r1.height(), |x, y| r1[(x, y)] || r2[(x, y)]);
+    (Relaxed { c1: r1, c2: r2, edges }, info)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use rand::{RngExt, rngs::Xoshiro256PlusPlus};
+
+    /// A random test case: C1 = a few thick random segments, C2 = a jittered, gappy copy plus
+    /// clutter, about 5% invalid pixels, random strengths.
+    pub(crate) struct Case {
+        pub(crate) c1: EdgeMap,
+        pub(crate) s1: Grid<f32>,
+        pub(crate) c2: EdgeMap,
+        pub(crate) mag: Grid<f32>,
+        pub(crate) valid: Grid<bool>,
+    }
+
+    pub(crate) fn random_case(w: u32, h: u32, seed: u64) -> Case {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut c1 = Grid::new(w, h, false);
+        let mut c2 = Grid::new(w, h, false);
+        for _ in 0..(w + h) / 16 + 1 {
+            let (x0, y0) = (rng.random_range(0..w) as f64, rng.random_range(0..h) as f64);
+            let (x1, y1) = (rng.random_range(0..w) as f64, rng.random_range(0..h) as f64);
+            let (ox, oy) = (rng.random_range(-2..=2i32) as f64, rng.random_range(-2..=2i32) as f64);
+            let steps = ((x1 - x0).abs().max((y1 - y0).abs()) as usize).max(1);
+            for s in 0..=steps {
+                let t = s as f64 / steps as f64;
+                let (x, y) = (x0 + t * (x1 - x0), y0 + t * (y1 - y0));
+                for (dx, dy) in [(0.0, 0.0), (1.0, 0.0)] {
+                    let (px, py) = ((x + dx).round() as i64, (y + dy).round() as i64);
+                    if c1.in_bounds(px, py) {
+                        c1[(px as u32, py as u32)] = true;
+                    }
+                }
+                let (qx, qy) = ((x + ox).round() as i64, (y + oy).round() as i64);
+                if c2.in_bounds(qx, qy) && rng.random_bool(0.85) {
+                    c2[(qx as u32, qy as u32)] = true;
+                }
+            }
+        }
+        for v in c2.as_mut_slice() {
+            if rng.random_bool(0.01) {
+                *v = true;
+            }
+        }
+        let s1 =
+            Grid::from_fn(w, h, |_, _| if rng.random_bool(0.02) { f32::NAN } else { rng.random::<f32>() });
+        let mag = Grid::from_fn(w, h, |_, _| 5.0 * rng.random::<f32>());
+        let valid = Grid::from_fn(w, h, |_, _| !rng.random_bool(0.05));
+        Case { c1, s1, c2, mag, valid }
+    }
+
+    fn count(m: &EdgeMap) -> usize {
+        m.as_slice().iter().filter(|&&b| b).count()
+    }
+
+    #[test]
+    fn incremental_energy_matches_full_recomputation() {
+        for seed in 0..4u64 {
+            let c = random_case(70, 50, seed);
+            let params =
+                Params { t_d_px: [2.0, 3.0, 4.5, 1.0][seed as usize], lambda: 0.7, ..Params::default() };
+            let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
+            let s1n = scaled(&c.s1, &p1, true);
+            let magn = scaled(&c.mag, &p2, true);
+            let ab = external_sum(&p1, &s1n, &p2, &magn);
+            let term = DistanceTerm::new(params.distance_cap_px());
+            let mut st = State::new(&p1, &p2, &s1n, &magn, &c.valid, term, params.lambda, ab);
+            assert!(st.len() > 50, "seed {seed}: too few points ({})", st.len());
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+            let mut accepted = 0;
+            for m in 0..6000 {
+                let t = if m < 3000 { 2.0 } else { 0.05 };
+                if st.step(&mut rng, t) {
+                    accepted += 1;
+                    let (ei, ee) = st.recompute_at(&st.pos.clone());
+                    assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
+                    assert_relative_eq!(
+                        st.energy(),
+                        ei + params.lambda * ee,
+                        epsilon = 1e-9,
+                        max_relative = 1e-6
+                    );
+                    if accepted % 97 == 0 {
+                        assert!(st.cache_consistent(), "seed {seed}, move {m}: stale nearest-distance cache");
+                    }
+                }
+            }
+            assert!(accepted > 500, "seed {seed}: only {accepted} accepted moves");
+            assert!(st.cache_consistent());
+            // The public full recomputation (EDT-based, raster order) agrees as well.
+            let (r1, r2) = st.maps(&st.pos);
+            let e = energy(&r1, &c.s1, &r2, &c.mag, &p1, &p2, &params);
+            assert_relative_eq!(e.total, st.energy(), epsilon = 1e-9, max_relative = 1e-6);
+            assert_relative_eq!(e.internal, st.e_int, epsilon = 1e-9, max_relative = 1e-6);
+        }
+    }
+
+    #[test]
+    fn prune_matches_brute_force() {
+        for seed in 0..20u64 {
+            let c = random_case(40, 30, 100 + seed);
+            let t_d = [0.0, 1.0, 1.5, 2.0, 3.2][seed as usize % 5];
+            let (p1, p2) = prune(&c.c1, &c.c2, t_d);
+            let pts = |m: &EdgeMap| {
+                m.enumerate()
+                    .filter(|(_, _, b)| **b)
+                    .map(|(x, y, _)| (x as f64, y as f64))
+                    .collect::<Vec<_>>()
+            };
+            let near = |p: (f64, f64), set: &[(f64, f64)]| {
+                set.iter().any(|q| (p.0 - q.0).hypot(p.1 - q.1) <= t_d + 1e-12)
+            };
+            let all1 = pts(&c.c1);
+            let want2 = Grid::from_fn(40, 30, |x, y| c.c2[(x, y)] && near((x as f64, y as f64), &all1));
+            let kept2 = pts(&want2);
+            let want1 = Grid::from_fn(40, 30, |x, y| c.c1[(x, y)] && near((x as f64, y as f64), &kept2));
+            assert_eq!(p2, want2, "seed {seed}, t_d {t_d}");
+            assert_eq!(p1, want1, "seed {seed}, t_d {t_d}");
+        }
+    }
+
+    #[test]
+    fn prune_with_empty_c1_removes_everything() {
+        let c = random_case(20, 20, 3);
+        let (p1, p2) = prune(&Grid::new(20, 20, false), &c.c2, 3.0);
+        assert_eq!(count(&p1) + count(&p2), 0);
+    }
+
+    #[test]
+    fn relax_reports_consistent_energies_and_keeps_point_counts() {
+        let c = random_case(80, 60, 11);
+        let params = Params::default();
+        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 5);
+        let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
+        assert_eq!(count(&r.c1), count(&p1));
+        assert_eq!(count(&r.c2), count(&p2));
+        assert_eq!(info.removed_c1 as usize, count(&c.c1) - count(&p1));
+        assert_eq!(info.removed_c2 as usize, count(&c.c2) - count(&p2));
+        assert!(info.removed_c2 > 0, "clutter should be pruned");
+        assert_eq!(info.e_external_before, 0.0);
+        assert!(info.energy_after <= info.energy_before);
+        assert!(info.energy_after < info.energy_before, "annealing should find a better state: {info:?}");
+        assert!(info.sweeps >= 1 && info.moves_accepted > 0 && info.moves_tried >= info.moves_accepted);
+        let e = energy(&r.c1, &c.s1, &r.c2, &c.mag, &p1, &p2, &params);
+        assert_relative_eq!(e.total, info.energy_after, epsilon = 1e-9, max_relative = 1e-9);
+        assert_relative_eq!(e.internal, info.e_internal_after, epsilon = 1e-9, max_relative = 1e-9);
+        let e0 = energy(&p1, &c.s1, &p2, &c.mag, &p1, &p2, &params);
+        assert_relative_eq!(e0.total, info.energy_before, epsilon = 1e-9, max_relative = 1e-9);
+        for (x, y, &b) in r.edges.enumerate() {
+            assert_eq!(b, r.c1[(x, y)] || r.c2[(x, y)]);
+            // Points only move onto valid pixels; the ones that never moved may sit anywhere.
+            if (r.c1[(x, y)] && !p1[(x, y)]) || (r.c2[(x, y)] && !p2[(x, y)]) {
+                assert!(c.valid[(x, y)], "a point moved onto invalid pixel ({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn relax_pulls_shifted_copies_together() {
+        // C1: a vertical line pair at x = 20, 21; C2: a line at x = 23. Uniform strengths, so
+        // only the distance term matters and relaxation must reduce it.
+        let (w, h) = (40, 40);
+        let c1 = Grid::from_fn(w, h, |x, _| x == 20 || x == 21);
+        let c2 = Grid::from_fn(w, h, |x, _| x == 23);
+        let ones = Grid::new(w, h, 1.0f32);
+        let valid = Grid::new(w, h, true);
+        let params = Params { lambda: 0.0, max_sweeps: 200, min_acceptance: 0.0, ..Params::default() };
+        let (_, info) = relax(&c1, &ones, &c2, &ones, &valid, &params, 1);
+        assert_relative_eq!(info.e_internal_before, 40.0 * (2.0 + 3.0));
+        assert!(info.e_internal_after < 0.5 * info.e_internal_before, "{info:?}");
+    }
+
+    #[test]
+    fn same_seed_same_output_at_any_thread_count() {
+        let c = random_case(64, 64, 21);
+        let params = Params::default();
+        let run = |seed| relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+        let (r0, i0) = run(9);
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+            let (r, i) = pool.install(|| run(9));
+            assert_eq!(r, r0, "{threads} threads");
+            assert_eq!(i, i0, "{threads} threads");
+        }
+        let (r2, _) = run(10);
+        assert_ne!(r2, r0, "different seeds should give different relaxations");
+    }
+
+    #[test]
+    fn zero_sweeps_only_prunes() {
+        let c = random_case(50, 50, 4);
+        let params = Params { max_sweeps: 0, ..Params::default() };
+        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 0);
+        let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
+        assert_eq!((r.c1, r.c2), (p1, p2));
+        assert_eq!(info.energy_after, info.energy_before);
+        assert_eq!(info.moves_tried, 0);
+    }
+
+    #[test]
+    fn empty_input_is_fine() {
+        let e = Grid::new(8, 6, false);
+        let z = Grid::new(8, 6, 0.0f32);
+        let (r, info) = relax(&e, &z, &e, &z, &Grid::new(8, 6, true), &Params::default(), 0);
+        assert_eq!(count(&r.edges), 0);
+        assert_eq!(info.energy_after, 0.0);
+    }
+
+    #[test]
+    fn params_default_validates_and_round_trips() {
+        let p = Params::default();
+        assert_eq!(p.validate(), Ok(()));
+        let back: Params = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
+        assert_eq!(back, p);
+        assert!(Params { cooling_delta: 1.0, ..p.clone() }.validate().is_err());
+        assert!(Params { lambda: f64::NAN, ..p.clone() }.validate().is_err());
+        assert!(serde_json::from_str::<Params>(r#"{"t_d": 2}"#).is_err());
+        assert_eq!(serde_json::from_str::<Params>(r#"{"lambda": 2.0}"#).unwrap().t_d_px, p.t_d_px);
+    }
+
+    mod proptests {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(24))]
+            #[test]
+            fn proptest_energy_never_increases(
+                w in 8u32..60, h in 8u32..60, seed in 0u64..1000, lambda in 0.0f64..3.0,
+                t_d in 0.0f64..5.0, t0 in prop_oneof![Just(0.0), 0.01f64..10.0], normalize in any::<bool>(),
+            ) {
+                let c = random_case(w, h, seed);
+                let params = Params { t_d_px: t_d, lambda, t0, normalize, max_sweeps: 15, ..Params::default() };
+                let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+                prop_assert!(info.energy_after <= info.energy_before, "{:?}", info);
+                let (p1, p2) = prune(&c.c1, &c.c2, t_d);
+                let e = energy(&r.c1, &c.s1, &r.c2, &c.mag, &p1, &p2, &params);
+                let e0 = energy(&p1, &c.s1, &p2, &c.mag, &p1, &p2, &params);
+                prop_assert!(e.total <= e0.total + 1e-9 * e0.total.abs().max(1.0), "{} > {}", e.total, e0.total);
+            }
+        }
+    }
+}

@@ -1,0 +1,181 @@
+//! Measures the relax stage on the synthetic training split (SPEC §3.4, the paper's Table II).
+//!
+//! For each training image (`scenegen::benchmark_image(false, i)`, the scenes `cargo xtask
+//! gen-data` writes as `abw.train.i`): features → regiongrow (C1, s1) and vcanny (C2, |∇|) →
+//! relax → final segmentation, all with default parameters except the relax ones given here.
+//! Reports boundary P/R/F (one-to-one matching, τ = 2) for C1, C2 and the relaxed C = C1 ∪ C2,
+//! the paper's precision against C1 (τ = 2) before and after relaxation, and Hoover correct
+//! detections at T = 0.8 for region growing alone vs the final segmentation.
+//!
+//! ```text
+//! cargo run --release --example relax_eval -- [--s1 curvedness|k] [--t-d 3] [--lambda 1] [--gap 2] [--min-region 50] [--tune]
+//! ```
+//! `--tune` sweeps `t_d_px × lambda` on the training split and prints one summary line per pair.
+#![allow(clippy::print_stdout)] // an example reports on stdout
+
+use anyhow::{Context, Result, bail};
+use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, valid_mask};
+use rayon::prelude::*;
+
+struct Prepared {
+    stem: String,
+    range: RangeImage,
+    gt: LabelImage,
+    camera: Camera,
+    valid: Grid<bool>,
+    rg_labels: LabelImage,
+    c1: EdgeMap,
+    s1: Grid<f32>,
+    c2: EdgeMap,
+    magnitude: Grid<f32>,
+}
+
+struct Row {
+    f_c1: f64,
+    f_c2: f64,
+    f_final: f64,
+    pp_c2: f64,
+    pp_c2_relaxed: f64,
+    pp_final: f64,
+    hoover_rg: u32,
+    hoover_final: u32,
+    gt_regions: u32,
+    rg_regions: u32,
+    final_regions: u32,
+    info: relax::Info,
+}
+
+fn prepare(index: u32, use_k: bool) -> Prepared {
+    let (sp, seed) = scenegen::benchmark_image(false, index);
+    let scene = scenegen::generate(&sp, seed);
+    let range = rangeio::abw::raw_to_range(&scene.range);
+    let camera = Camera::abw_for(false, index);
+    let valid = valid_mask(&range);
+    let feats = features::compute(&range, &features::Params::default());
+    let (seg, _) = regiongrow::grow(&range, &feats, &camera, &regiongrow::Params::default(), 0);
+    let canny = vcanny::detect_planes(&feats.plane, &valid, &vcanny::Params::default());
+    let s1 = if use_k { feats.k.map(|v| v.abs()) } else { feats.curvedness.clone() };
+    Prepared {
+        stem: format!("abw.train.{index}"),
+        range,
+        gt: scene.labels,
+        camera,
+        valid,
+        rg_labels: seg.labels,
+        c1: seg.c1,
+        s1,
+        c2: canny.edges,
+        magnitude: canny.magnitude,
+    }
+}
+
+fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams) -> Row {
+    let (r, info) = relax::relax(&p.c1, &p.s1, &p.c2, &p.magnitude, &p.valid, params, 0);
+    let (labels, regions) = relax::final_segmentation(&p.range, &p.camera, &r.edges, sp);
+    let f = |e: &EdgeMap| eval::boundary::matched(e, &p.gt, 2.0).f;
+    let pp = |e: &EdgeMap| eval::paper_precision(e, &p.c1, 2.0).unwrap_or(f64::NAN);
+    let nz = eval::Convention::NonZero;
+    let h_rg = eval::hoover::compare_with(&p.gt, &p.rg_labels, 0.8, None, None, nz);
+    let h_final = eval::hoover::compare_with(&p.gt, &labels, 0.8, None, None, nz);
+    Row {
+        f_c1: f(&p.c1),
+        f_c2: f(&p.c2),
+        f_final: f(&r.edges),
+        pp_c2: pp(&p.c2),
+        pp_c2_relaxed: pp(&r.c2),
+        pp_final: pp(&r.edges),
+        hoover_rg: h_rg.correct,
+        hoover_final: h_final.correct,
+        gt_regions: h_rg.gt_regions,
+        rg_regions: h_rg.seg_regions,
+        final_regions: regions.len() as u32,
+        info,
+    }
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = v.collect();
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+fn main() -> Result<()> {
+    let mut params = relax::Params::default();
+    let mut sp = relax::SegmentParams::default();
+    let (mut tune, mut use_k) = (false, false);
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = |name: &str| args.next().with_context(|| format!("{name} needs a value"));
+        match a.as_str() {
+            "--tune" => tune = true,
+            "--s1" => use_k = value("--s1")? == "k",
+            "--t-d" => params.t_d_px = value("--t-d")?.parse()?,
+            "--lambda" => params.lambda = value("--lambda")?.parse()?,
+            "--gap" => sp.gap_close_px = value("--gap")?.parse()?,
+            "--min-region" => sp.min_region_px = value("--min-region")?.parse()?,
+            _ => bail!("unknown argument {a}"),
+        }
+    }
+    params.validate().map_err(anyhow::Error::msg)?;
+    let images: Vec<Prepared> = (0..10u32).into_par_iter().map(|i| prepare(i, use_k)).collect();
+    println!("s1 = {}", if use_k { "|K|" } else { "curvedness" });
+    if tune {
+        println!("t_d  lambda | F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG  final (of GT)");
+        for t_d in [1.5, 2.0, 3.0, 4.0] {
+            for lambda in [0.0, 0.3, 1.0, 3.0] {
+                let p = relax::Params { t_d_px: t_d, lambda, ..params.clone() };
+                let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &p, &sp)).collect();
+                println!(
+                    "{t_d:<4} {lambda:<6} | {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:.2}  {:.2}  ({:.2})",
+                    mean(rows.iter().map(|r| r.f_c2)),
+                    mean(rows.iter().map(|r| r.f_final)),
+                    mean(rows.iter().map(|r| r.pp_c2)),
+                    mean(rows.iter().map(|r| r.pp_c2_relaxed)),
+                    mean(rows.iter().map(|r| r.pp_final)),
+                    mean(rows.iter().map(|r| f64::from(r.hoover_rg))),
+                    mean(rows.iter().map(|r| f64::from(r.hoover_final))),
+                    mean(rows.iter().map(|r| f64::from(r.gt_regions))),
+                );
+            }
+        }
+        return Ok(());
+    }
+    println!("relax params: {params:?}\nsegment params: {sp:?}");
+    println!(
+        "image         | F(C1)  F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG final /GT | #RG #fin | rm C1 rm C2 sweeps E0 -> E1"
+    );
+    let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &params, &sp)).collect();
+    for (im, r) in images.iter().zip(&rows) {
+        println!(
+            "{:<13} | {:.4} {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:>3} {:>3} /{:<3} | {:>3} {:>3} | {:>5} {:>5} {:>3} {:.0} -> {:.0}",
+            im.stem,
+            r.f_c1,
+            r.f_c2,
+            r.f_final,
+            r.pp_c2,
+            r.pp_c2_relaxed,
+            r.pp_final,
+            r.hoover_rg,
+            r.hoover_final,
+            r.gt_regions,
+            r.rg_regions,
+            r.final_regions,
+            r.info.removed_c1,
+            r.info.removed_c2,
+            r.info.sweeps,
+            r.info.energy_before,
+            r.info.energy_after,
+        );
+    }
+    println!(
+        "mean          | {:.4} {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:.2} {:.2}",
+        mean(rows.iter().map(|r| r.f_c1)),
+        mean(rows.iter().map(|r| r.f_c2)),
+        mean(rows.iter().map(|r| r.f_final)),
+        mean(rows.iter().map(|r| r.pp_c2)),
+        mean(rows.iter().map(|r| r.pp_c2_relaxed)),
+        mean(rows.iter().map(|r| r.pp_final)),
+        mean(rows.iter().map(|r| f64::from(r.hoover_rg))),
+        mean(rows.iter().map(|r| f64::from(r.hoover_final))),
+    );
+    Ok(())
+}
