@@ -1,12 +1,33 @@
-//! `rangeseg render`.
+//! `rangeseg render`: a viewable 8-bit PNG of a range file.
 
+use super::info::ReadArgs;
+use std::io::Write;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Arguments of `rangeseg render`.
 #[derive(Debug, clap::Args)]
-pub(crate) struct Args {}
+pub(crate) struct Args {
+    /// Range file: ABW Sun rasterfile, PGM, PNG, TIFF or organized PCD.
+    #[arg(value_name = "FILE")]
+    file: PathBuf,
+    /// Output PNG: valid range (0.5–99.5th percentile) as gray 1..255, near = bright, no data black.
+    #[arg(short, long, value_name = "OUT.png")]
+    output: PathBuf,
+    #[command(flatten)]
+    read: ReadArgs,
+}
 
 /// Runs `rangeseg render`.
-pub(crate) fn run(_args: Args) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("`rangeseg render` is not implemented yet")
+pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let frame = rangeio::read(&args.file, &args.read.options())?;
+    rangeio::png::write_depth_png(&args.output, &frame.range)?;
+    let (w, h) = frame.range.dimensions();
+    writeln!(
+        std::io::stdout().lock(),
+        "wrote {} ({w}x{h}, {:.1}% valid)",
+        args.output.display(),
+        100.0 * frame.valid_fraction()
+    )?;
+    Ok(ExitCode::SUCCESS)
 }

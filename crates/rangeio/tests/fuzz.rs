@@ -1,0 +1,148 @@
+//! Property tests: no reader panics on random or mutated bytes, and writers round-trip.
+
+use proptest::prelude::*;
+use rangeimage::Grid;
+use rangeio::{Format, ReadOptions, abw, lzf, pcd, pgm};
+use std::io::Cursor;
+use std::path::Path;
+
+/// Small valid files of every format the generic reader knows.
+fn seeds() -> Vec<(Vec<u8>, &'static str)> {
+    let raw = Grid::from_fn(5, 3, |x, y| (10 + x * 7 + y) as u8);
+    let s16 = Grid::from_fn(4, 3, |x, y| (x * 1000 + y * 3 + 1) as u16);
+    let z = Grid::from_fn(4, 3, |x, y| 1.0 + 0.1 * x as f32 + 0.01 * y as f32);
+    let xs = Grid::from_fn(4, 3, |x, y| (x as f32 - 1.5) * z[(x, y)] / 500.0);
+    let ys = Grid::from_fn(4, 3, |x, y| (y as f32 - 1.0) * z[(x, y)] / 500.0);
+    let mut png16 = Vec::new();
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, s16.as_slice().to_vec())
+        .unwrap()
+        .write_to(&mut Cursor::new(&mut png16), image::ImageFormat::Png)
+        .unwrap();
+    let mut tiff16 = Vec::new();
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, s16.as_slice().to_vec())
+        .unwrap()
+        .write_to(&mut Cursor::new(&mut tiff16), image::ImageFormat::Tiff)
+        .unwrap();
+    vec![
+        (abw::raster_to_bytes(&raw), "a.range"),
+        (pgm::pgm_to_bytes(&s16), "a.pgm"),
+        (b"P2 2 2 9\n1 2\n3 9\n".to_vec(), "b.pgm"),
+        (png16, "a.png"),
+        (tiff16, "a.tiff"),
+        (pcd::pcd_to_bytes(&xs, &ys, &z, Format::PcdAscii), "a.pcd"),
+        (pcd::pcd_to_bytes(&xs, &ys, &z, Format::PcdBinary), "b.pcd"),
+        (pcd::pcd_to_bytes(&xs, &ys, &z, Format::PcdBinaryCompressed), "c.pcd"),
+    ]
+}
+
+/// Runs every reader on `bytes`; any error must name the file.
+fn read_all(bytes: &[u8], name: &str) {
+    let path = Path::new(name);
+    let check = |msg: String| assert!(msg.starts_with(&format!("{name}: ")), "{msg}");
+    for opts in [
+        ReadOptions::default(),
+        ReadOptions { pgm_little_endian: true, nyu_disparity_to_depth: true, ..Default::default() },
+    ] {
+        if let Err(e) = rangeio::read_bytes(bytes, path, &opts) {
+            check(e.to_string());
+        }
+    }
+    if let Err(e) = abw::raster_from_bytes(bytes, path) {
+        check(e.to_string());
+    }
+    if let Err(e) = abw::labels_from_bytes(bytes, path, true) {
+        check(e.to_string());
+    }
+    if let Err(e) = pgm::pgm_from_bytes(bytes, path, false) {
+        check(e.to_string());
+    }
+    if let Err(e) = pcd::pcd_from_bytes(bytes, path) {
+        check(e.to_string());
+    }
+    if let Err(e) = rangeio::png::edge_png_from_bytes(bytes, path) {
+        check(e.to_string());
+    }
+    let text = String::from_utf8_lossy(bytes);
+    if let Err(e) = abw::angles_from_str(&text, path) {
+        check(e.to_string());
+    }
+    if let Err(e) = abw::normals_from_str(&text, path) {
+        check(e.to_string());
+    }
+    let _ = lzf::decompress(bytes, bytes.len() * 3);
+}
+
+proptest! {
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..300), k in 0usize..8) {
+        let (_, name) = seeds()[k];
+        read_all(&bytes, name);
+    }
+
+    #[test]
+    fn random_bytes_after_a_magic_never_panic(k in 0usize..8, tail in proptest::collection::vec(any::<u8>(), 0..200)) {
+        let (seed, name) = &seeds()[k];
+        let mut bytes = seed[..seed.len().min(8)].to_vec();
+        bytes.extend(tail);
+        read_all(&bytes, name);
+    }
+
+    #[test]
+    fn mutated_files_never_panic(
+        k in 0usize..8,
+        edits in proptest::collection::vec((any::<proptest::sample::Index>(), any::<u8>()), 1..6),
+        cut in any::<proptest::sample::Index>(),
+        truncate in any::<bool>(),
+    ) {
+        let (seed, name) = &seeds()[k];
+        let mut bytes = seed.clone();
+        for (i, v) in edits {
+            let i = i.index(bytes.len());
+            bytes[i] = v;
+        }
+        if truncate {
+            bytes.truncate(cut.index(bytes.len() + 1));
+        }
+        read_all(&bytes, name);
+    }
+
+    #[test]
+    fn mutated_headers_never_panic(k in 0usize..8, at in 0usize..64, v in any::<u32>()) {
+        let (seed, name) = &seeds()[k];
+        let mut bytes = seed.clone();
+        let at = at.min(bytes.len().saturating_sub(4));
+        bytes[at..at + 4].copy_from_slice(&v.to_be_bytes());
+        read_all(&bytes, name);
+    }
+
+    #[test]
+    fn lzf_random_streams_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..200), n in 0usize..2000) {
+        if let Ok(out) = lzf::decompress(&bytes, n) {
+            prop_assert_eq!(out.len(), n);
+        }
+    }
+
+    #[test]
+    fn range_round_trips(img in rangeimage::testing::arbitrary_range_image(1..20, 1..20)) {
+        let bytes = abw::raster_to_bytes(&abw::range_to_raw(&img));
+        let back = abw::raw_to_range(&abw::raster_from_bytes(&bytes, Path::new("p.range")).unwrap());
+        for (a, b) in img.as_slice().iter().zip(back.as_slice()) {
+            if a.is_nan() {
+                prop_assert!(b.is_nan());
+            } else {
+                prop_assert_eq!(*b, a.round().clamp(1.0, 255.0));
+            }
+        }
+    }
+
+    #[test]
+    fn labels_round_trip(l in rangeimage::testing::arbitrary_label_image(1..30, 1..30, 400)) {
+        let (raw, pairs) = abw::labels_to_raw(&l);
+        let back = abw::labels_from_bytes(&abw::raster_to_bytes(&raw), Path::new("p.ms-seg"), false).unwrap();
+        for (a, b) in l.as_slice().iter().zip(back.as_slice()) {
+            let want = pairs.iter().find(|(old, _)| old == a).map_or(0, |&(_, new)| u32::from(new));
+            prop_assert_eq!(*b, want);
+        }
+        prop_assert!(pairs.len() <= 246);
+    }
+}
