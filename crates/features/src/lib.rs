@@ -1,1 +1,368 @@
-//! Per-pixel local planes, derivatives and curvatures of a range image.
+//! Per-pixel local planes, derivatives and curvatures of a range image (SPEC §3.1).
+//!
+//! - [`fit_planes`]: least-squares plane `z = a·x + b·y + c` per pixel over the valid pixels of a `w × w` window,
+//!   x and y measured from the image centre, by running box sums (O(1) per pixel).
+//! - [`compute`]: the plane, the derivatives of a least-squares quadratic (2D Savitzky–Golay, kernels from faer's
+//!   QR), Gaussian and mean curvature, principal curvatures, curvedness and the windowed standard deviation of K.
+//! - [`shade`]: a Lambertian rendering for figures.
+//!
+//! No-data pixels (NaN) never enter a fit, and every output is NaN at no-data pixels.
+
+mod curvature;
+mod plane;
+mod quadratic;
+mod shade;
+
+use rangeimage::{Grid, PlaneMap, RangeImage, SurfaceFeatures};
+
+/// The `[features]` table of a config file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Side of the square window of the local plane fit (odd, ≥ 3).
+    pub window_px: u32,
+    /// Side of the square window of the quadratic (derivative) fit (odd, ≥ 3).
+    pub deriv_window_px: u32,
+    /// Side of the square window over which the standard deviation of K is taken (odd, ≥ 1).
+    pub k_std_window_px: u32,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self { window_px: 5, deriv_window_px: 5, k_std_window_px: 5 }
+    }
+}
+
+impl Params {
+    /// Checks the values; the message names the offending field.
+    pub fn validate(&self) -> Result<(), String> {
+        let odd = |name: &str, v: u32, min: u32| {
+            if v < min || v.is_multiple_of(2) || v > 101 {
+                Err(format!("features.{name} must be odd and in {min}..=101, got {v}"))
+            } else {
+                Ok(())
+            }
+        };
+        odd("window_px", self.window_px, 3)?;
+        odd("deriv_window_px", self.deriv_window_px, 3)?;
+        odd("k_std_window_px", self.k_std_window_px, 1)
+    }
+}
+
+/// Computes every field of [`SurfaceFeatures`] for `range` (NaN = no data).
+///
+/// # Panics
+/// If `params` is invalid (see [`Params::validate`]).
+pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
+    let _s = tracing::info_span!("features", w = range.width(), h = range.height()).entered();
+    if let Err(e) = params.validate() {
+        panic!("invalid features params: {e}");
+    }
+    let plane = plane::fit(range, params.window_px);
+    let kernels = quadratic::SgKernels::new(params.deriv_window_px);
+    let (gradient, hessian) = quadratic::derivatives(range, &kernels);
+    let c = curvature::curvatures(&gradient, &hessian);
+    let k_std = curvature::window_std(&c.k, params.k_std_window_px);
+    tracing::debug!(
+        valid_planes = plane.as_slice().iter().filter(|p| p[0].is_finite()).count(),
+        valid_k = c.k.as_slice().iter().filter(|v| v.is_finite()).count(),
+        "features done"
+    );
+    SurfaceFeatures {
+        plane,
+        gradient,
+        hessian,
+        k: c.k,
+        h: c.h,
+        principal: c.principal,
+        curvedness: c.curvedness,
+        k_std,
+    }
+}
+
+/// Fits the local plane `[a, b, c]` of every pixel over the valid pixels of its `window_px × window_px` window.
+///
+/// x and y are pixel coordinates measured from the image centre `((w−1)/2, (h−1)/2)`, so `c` is the depth of the
+/// plane at the image centre. `[NAN; 3]` at no-data pixels and where fewer than 3 non-collinear valid pixels remain.
+///
+/// # Panics
+/// If `window_px` is even or smaller than 3.
+pub fn fit_planes(range: &RangeImage, window_px: u32) -> PlaneMap {
+    let _s = tracing::info_span!("features::fit_planes", w = range.width(), h = range.height()).entered();
+    assert!(
+        window_px >= 3 && !window_px.is_multiple_of(2),
+        "plane window must be odd and ≥ 3, got {window_px}"
+    );
+    plane::fit(range, window_px)
+}
+
+/// A Lambertian shading of `range` (light from the viewer's upper left, normals from 5×5 plane fits);
+/// no-data pixels are 0 (black), valid pixels 1..=255.
+pub fn shade(range: &RangeImage) -> Grid<u8> {
+    let _s = tracing::info_span!("features::shade", w = range.width(), h = range.height()).entered();
+    shade::shade_planes(&plane::fit(range, 5))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const NAN: f32 = f32::NAN;
+
+    fn image(w: u32, h: u32, f: impl Fn(f64, f64) -> f64) -> RangeImage {
+        Grid::from_fn(w, h, |x, y| f(f64::from(x), f64::from(y)) as f32)
+    }
+
+    #[test]
+    fn tilted_plane_gives_its_parameters() {
+        let (a, b, c) = (0.3, -0.2, 100.0);
+        // Centre of a 40×30 image is (19.5, 14.5).
+        let img = image(40, 30, |x, y| a * (x - 19.5) + b * (y - 14.5) + c);
+        let f = compute(&img, &Params::default());
+        for (x, y, p) in f.plane.enumerate() {
+            assert!((f64::from(p[0]) - a).abs() < 1e-4, "a at ({x}, {y}) = {}", p[0]);
+            assert!((f64::from(p[1]) - b).abs() < 1e-4, "b at ({x}, {y}) = {}", p[1]);
+            assert!((f64::from(p[2]) - c).abs() < 1e-4, "c at ({x}, {y}) = {}", p[2]);
+        }
+        for i in 0..img.len() {
+            let g = f.gradient.as_slice()[i];
+            assert!((f64::from(g[0]) - a).abs() < 1e-4 && (f64::from(g[1]) - b).abs() < 1e-4);
+            // The f32 input itself is only exact to ~1e-5 at z = 100, which bounds the second derivatives.
+            assert!(f.k.as_slice()[i].abs() < 1e-8, "K = {}", f.k.as_slice()[i]);
+            assert!(f.h.as_slice()[i].abs() < 2e-5, "H = {}", f.h.as_slice()[i]);
+            assert!(f.curvedness.as_slice()[i].abs() < 2e-5);
+            assert!(f.k_std.as_slice()[i].abs() < 1e-8);
+        }
+    }
+
+    #[test]
+    fn fit_planes_matches_compute_plane() {
+        let img = image(20, 17, |x, y| 0.01 * x * x + 0.5 * y);
+        let a = fit_planes(&img, 5);
+        let b = compute(&img, &Params::default()).plane;
+        assert!(
+            a.as_slice()
+                .iter()
+                .flatten()
+                .zip(b.as_slice().iter().flatten())
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
+    }
+
+    /// Exact K and H of the graph z = f(x, y) from its analytic derivatives.
+    fn kh(fx: f64, fy: f64, fxx: f64, fxy: f64, fyy: f64) -> (f64, f64) {
+        let q = 1.0 + fx * fx + fy * fy;
+        let k = (fxx * fyy - fxy * fxy) / (q * q);
+        let h = ((1.0 + fy * fy) * fxx - 2.0 * fx * fy * fxy + (1.0 + fx * fx) * fyy) / (2.0 * q.powf(1.5));
+        (k, h)
+    }
+
+    #[test]
+    fn sphere_curvatures_match_formula() {
+        // Lower hemisphere of radius 60 seen from above: z = z0 - sqrt(R² - ρ²), K = 1/R², |H| = 1/R.
+        let (cx, cy, r, z0) = (32.0, 32.0, 60.0, 200.0);
+        let img = image(64, 64, |x, y| z0 - (r * r - (x - cx).powi(2) - (y - cy).powi(2)).sqrt());
+        let f = compute(&img, &Params::default());
+        for y in 8..56u32 {
+            for x in 8..56u32 {
+                let k = f64::from(f.k[(x, y)]);
+                let h = f64::from(f.h[(x, y)]);
+                assert_relative_eq!(k, 1.0 / (r * r), max_relative = 0.05);
+                assert_relative_eq!(h, 1.0 / r, max_relative = 0.05);
+                let [k1, k2] = f.principal[(x, y)];
+                assert_relative_eq!(f64::from(k1), 1.0 / r, max_relative = 0.05);
+                assert_relative_eq!(f64::from(k2), 1.0 / r, max_relative = 0.05);
+                assert_relative_eq!(f64::from(f.curvedness[(x, y)]), 1.0 / r, max_relative = 0.05);
+            }
+        }
+    }
+
+    #[test]
+    fn paraboloid_curvatures_match_formula() {
+        // z = 0.01 x'² − 0.005 y'² + 0.003 x'y' (a saddle, K < 0), x' and y' from (30, 25).
+        let (p, q, s) = (0.01, -0.005, 0.003);
+        let img = image(60, 50, |x, y| {
+            50.0 + p * (x - 30.0).powi(2) + q * (y - 25.0).powi(2) + s * (x - 30.0) * (y - 25.0)
+        });
+        let f = compute(&img, &Params::default());
+        for y in 5..45u32 {
+            for x in 5..55u32 {
+                let (u, v) = (f64::from(x) - 30.0, f64::from(y) - 25.0);
+                let (k, h) = kh(2.0 * p * u + s * v, 2.0 * q * v + s * u, 2.0 * p, s, 2.0 * q);
+                assert_relative_eq!(f64::from(f.k[(x, y)]), k, max_relative = 0.05);
+                assert_relative_eq!(f64::from(f.h[(x, y)]), h, max_relative = 0.05, epsilon = 1e-7);
+            }
+        }
+    }
+
+    #[test]
+    fn crease_has_large_h_and_zero_k() {
+        // A roof: z = 100 + 0.5·|x − 20|, crease along x = 20.
+        let img = image(41, 30, |x, _| 100.0 + 0.5 * (x - 20.0).abs());
+        let f = compute(&img, &Params::default());
+        for y in 3..27u32 {
+            assert!(f.k[(20, y)].abs() < 1e-6, "K on crease = {}", f.k[(20, y)]);
+            assert!(f.h[(20, y)].abs() > 0.05, "H on crease = {}", f.h[(20, y)]);
+            assert!(f.curvedness[(20, y)] > 0.05);
+            // Away from the crease the faces are flat.
+            assert!(f.h[(10, y)].abs() < 1e-6 && f.h[(30, y)].abs() < 1e-6);
+        }
+        // The plane slope changes sign across the crease.
+        assert!(f.plane[(15, 10)][0] < -0.49 && f.plane[(25, 10)][0] > 0.49);
+    }
+
+    #[test]
+    fn no_data_never_leaks_into_fits() {
+        let plane = |x: f64, y: f64| 0.7 * x - 0.4 * y + 30.0;
+        let full = image(30, 30, plane);
+        let mut holed = full.clone();
+        // A block of no data with a wild value pattern around it would show up if it leaked.
+        for y in 10..14 {
+            for x in 12..20 {
+                holed[(x, y)] = NAN;
+            }
+        }
+        holed[(3, 25)] = NAN;
+        let ff = compute(&full, &Params::default());
+        let fh = compute(&holed, &Params::default());
+        for (x, y, p) in fh.plane.enumerate() {
+            if holed[(x, y)].is_nan() {
+                assert!(p.iter().all(|v| v.is_nan()), "no-data pixel got a plane");
+                assert!(fh.k[(x, y)].is_nan() && fh.gradient[(x, y)][0].is_nan());
+                continue;
+            }
+            let q = ff.plane[(x, y)];
+            for i in 0..3 {
+                assert!((p[i] - q[i]).abs() < 1e-4, "plane at ({x}, {y}): {p:?} vs {q:?}");
+            }
+            let (g, gf) = (fh.gradient[(x, y)], ff.gradient[(x, y)]);
+            assert!((g[0] - gf[0]).abs() < 1e-4 && (g[1] - gf[1]).abs() < 1e-4, "gradient at ({x}, {y})");
+            assert!(fh.k[(x, y)].abs() < 1e-8 && fh.h[(x, y)].abs() < 2e-5, "curvature at ({x}, {y})");
+        }
+        // Values inside the hole must not matter at all.
+        let mut other = holed.clone();
+        for y in 10..14 {
+            for x in 12..20 {
+                other[(x, y)] = f32::INFINITY;
+            }
+        }
+        assert_eq!(bits(&compute(&other, &Params::default())), bits(&fh));
+    }
+
+    /// Every float of the features as bits, so NaN compares equal to NaN.
+    fn bits(f: &SurfaceFeatures) -> Vec<u32> {
+        let mut v: Vec<u32> = f.plane.as_slice().iter().flatten().map(|x| x.to_bits()).collect();
+        v.extend(f.gradient.as_slice().iter().flatten().map(|x| x.to_bits()));
+        v.extend(f.hessian.as_slice().iter().flatten().map(|x| x.to_bits()));
+        v.extend(f.principal.as_slice().iter().flatten().map(|x| x.to_bits()));
+        for g in [&f.k, &f.h, &f.curvedness, &f.k_std] {
+            v.extend(g.as_slice().iter().map(|x| x.to_bits()));
+        }
+        v
+    }
+
+    #[test]
+    fn nan_only_window_gives_nan() {
+        let mut img = Grid::new(11, 11, NAN);
+        img[(5, 5)] = 10.0;
+        img[(6, 5)] = 11.0;
+        let f = compute(&img, &Params::default());
+        assert!(f.plane[(5, 5)].iter().all(|v| v.is_nan()), "two points do not make a plane");
+        assert!(f.k[(5, 5)].is_nan());
+        // Collinear valid pixels: still no plane.
+        let line = Grid::from_fn(11, 11, |x, y| if y == 5 { x as f32 } else { NAN });
+        assert!(fit_planes(&line, 5).as_slice().iter().all(|p| p[0].is_nan()));
+        let empty = Grid::new(7, 7, NAN);
+        let f = compute(&empty, &Params::default());
+        assert!(
+            f.plane.as_slice().iter().all(|p| p[0].is_nan()) && f.k_std.as_slice().iter().all(|v| v.is_nan())
+        );
+    }
+
+    #[test]
+    fn partial_window_quadratic_is_exact_on_quadratics() {
+        // Near NaN pixels and the border the quadratic is fitted from the valid pixels alone: still exact.
+        let f_ = |x: f64, y: f64| 5.0 + 0.2 * x + 0.01 * x * x - 0.02 * x * y + 0.015 * y * y;
+        let mut img = image(16, 16, f_);
+        img[(7, 7)] = NAN;
+        img[(8, 9)] = NAN;
+        let f = compute(&img, &Params::default());
+        for (x, y, g) in f.hessian.enumerate() {
+            if img[(x, y)].is_nan() {
+                continue;
+            }
+            assert!(
+                (g[0] - 0.02).abs() < 1e-4 && (g[1] + 0.02).abs() < 1e-4 && (g[2] - 0.03).abs() < 1e-4,
+                "{g:?}"
+            );
+            let d = f.gradient[(x, y)];
+            let (xf, yf) = (f64::from(x), f64::from(y));
+            assert!((f64::from(d[0]) - (0.2 + 0.02 * xf - 0.02 * yf)).abs() < 1e-4);
+            assert!((f64::from(d[1]) - (-0.02 * xf + 0.03 * yf)).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn kernels_from_faer_are_savitzky_golay() {
+        // The 5×5 kernel of c1 is u / Σu² with Σu² = 50, and the kernels reproduce a quadratic exactly.
+        let k = quadratic::SgKernels::new(5);
+        for (i, p) in k.pinv.iter().enumerate() {
+            let u = (i % 5) as f64 - 2.0;
+            assert_relative_eq!(p[1], u / 50.0, epsilon = 1e-12);
+        }
+        let coef = [1.0, 2.0, -3.0, 0.5, 0.25, -0.75];
+        for j in 0..6 {
+            let got: f64 = k
+                .pinv
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let (u, v) = ((i % 5) as f64 - 2.0, (i / 5) as f64 - 2.0);
+                    let z = coef[0]
+                        + coef[1] * u
+                        + coef[2] * v
+                        + coef[3] * u * u
+                        + coef[4] * u * v
+                        + coef[5] * v * v;
+                    p[j] * z
+                })
+                .sum();
+            assert_relative_eq!(got, coef[j], epsilon = 1e-10);
+        }
+    }
+
+    #[test]
+    fn shade_is_black_on_no_data_and_lit_from_upper_left() {
+        let mut img = image(20, 20, |x, y| 100.0 + 0.5 * (x - 10.0).abs() + 0.0 * y);
+        img[(2, 2)] = NAN;
+        let s = shade(&img);
+        assert_eq!(s[(2, 2)], 0);
+        assert!(s.as_slice().iter().enumerate().all(|(i, &v)| v > 0 || img.as_slice()[i].is_nan()));
+        // Left half z decreases to the right: its normal turns toward the left, i.e. toward the light.
+        assert!(s[(5, 10)] > s[(15, 10)], "{} vs {}", s[(5, 10)], s[(15, 10)]);
+    }
+
+    #[test]
+    fn k_std_is_zero_inside_a_surface_and_positive_where_k_changes() {
+        // Left half a paraboloid (K > 0 constant near the axis), right half a plane (K = 0), joined at x = 20.
+        let img = image(41, 30, |x, y| {
+            if x < 20.0 {
+                100.0 + 0.02 * ((x - 20.0).powi(2) + (y - 15.0).powi(2))
+            } else {
+                100.0 + 0.02 * (y - 15.0).powi(2)
+            }
+        });
+        let f = compute(&img, &Params::default());
+        assert!(f.k_std[(35, 15)] < 1e-8, "plane: {}", f.k_std[(35, 15)]);
+        assert!(f.k_std[(20, 15)] > 1e-5, "junction: {}", f.k_std[(20, 15)]);
+        assert!(f.k_std.as_slice().iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+
+    #[test]
+    fn validate_rejects_even_windows() {
+        assert!(Params::default().validate().is_ok());
+        assert!(Params { window_px: 4, ..Params::default() }.validate().unwrap_err().contains("window_px"));
+        assert!(Params { deriv_window_px: 1, ..Params::default() }.validate().is_err());
+    }
+}
