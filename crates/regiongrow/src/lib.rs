@@ -1,1 +1,296 @@
 //! Multi-seed region growing with a curvature homogeneity criterion, and region borders C1.
+//!
+//! This is the paper's Algorithm 1 (SPEC §3.2), completed where the paper is silent:
+//!
+//! 1. **Seeds.** Every pixel that can grow (finite range and finite features; in
+//!    [`Mode::Default`] also curvedness ≤ `max_curvedness`) and whose `k_std` ≤ `t_sigma` is a
+//!    candidate. The candidates are visited in a random order (a Fisher–Yates permutation from
+//!    `Xoshiro256PlusPlus::seed_from_u64(seed)`), i.e. random draws without replacement; a
+//!    candidate that is still unlabelled when drawn becomes a seed and its region is grown to
+//!    completion before the next draw. Drawing stops at `max_seeds` seeds or when the candidates
+//!    run out. If fewer than `min_seeds` seeds were accepted, `t_sigma` is doubled and the
+//!    still-unlabelled pixels are drawn again (at most [`MAX_RELAXATIONS`] times); the threshold
+//!    actually used is reported in [`Info::t_sigma_used`].
+//! 2. **Growth** is breadth-first over 4- (or 8-) neighbours. [`Mode::Paper`]: a neighbour joins if
+//!    `|K − mean K of the region| ≤ max_k_diff` (Gaussian curvature only, so regions leak across
+//!    creases, where K ≈ 0, see SPEC §3.1). [`Mode::Default`]: a neighbour joins if its curvedness
+//!    ≤ `max_curvedness` and its local normal is within `max_slant_deg` of the line of sight
+//!    (seed and growth condition), its local normal is within `max_angle_deg` of the region's plane normal,
+//!    and its 3D point lies within `max_residual` of the region's plane. The region plane starts
+//!    as the seed's local plane and is refitted from running 3D moments after
+//!    `max(refit_every_px, n / 4)` additions (so O(log n) refits per region).
+//!    Local normals come from the features' local plane slopes `(a, b)` back-projected through the
+//!    camera at the pixel's range value.
+//! 3. **Merge**: adjacent regions with `|mean K₁ − mean K₂| < t_m` (default mode: and normals within
+//!    `merge_max_angle_deg`, and the RMS distance of each region's points to the other's plane
+//!    ≤ `merge_max_residual`) are merged by a deterministic fixpoint over the region adjacency
+//!    graph. Each pass sorts the candidate pairs by a dissimilarity score, ties broken by the
+//!    regions' first pixel in raster order (never by label value, so relabelling the input does
+//!    not change the result), and merges with union–find, re-checking each pair on the merged
+//!    statistics; passes repeat until one merges nothing.
+//! 4. Regions under `min_region_px` become 0. Optionally (`fill_unlabelled`) the left-over
+//!    valid pixels (crease bands, dropped fragments) are given, by a breadth-first flood from the
+//!    regions' borders, to the 4-adjacent region whose plane is nearest, if that distance is
+//!    ≤ `fill_max_residual`. Labels are renumbered 1..n in raster order of first pixel.
+//! 5. **C1** = [`borders`] of the final labels.
+//!
+//! The stage is single-threaded and fully deterministic for a given input, params and seed.
+
+mod grow;
+mod merge;
+mod plane;
+
+#[cfg(test)]
+mod testutil;
+
+use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
+
+/// How many times `t_sigma` is doubled at most when fewer than `min_seeds` seeds were accepted.
+pub const MAX_RELAXATIONS: u32 = 8;
+
+/// The homogeneity criterion of region growth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// The paper's criterion: Gaussian curvature K close to the region's mean K.
+    Paper,
+    /// Curvedness under a threshold plus consistency with the region's 3D plane.
+    #[default]
+    Default,
+}
+
+/// The `[regiongrow]` table of a config file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Homogeneity criterion.
+    pub mode: Mode,
+    /// T_σ: a seed is accepted only where the std of K over its window is ≤ this.
+    pub t_sigma: f32,
+    /// T_m: adjacent regions merge only if their mean K differ by less than this.
+    pub t_m: f32,
+    /// Minimum number of seeds (`t_sigma` is relaxed to reach it, see the crate docs).
+    pub min_seeds: u32,
+    /// Maximum number of seeds (regions grown).
+    pub max_seeds: u32,
+    /// Paper mode: a pixel joins if `|K − mean K of the region|` ≤ this.
+    pub max_k_diff: f32,
+    /// Default mode: a pixel grows (or seeds) only if its curvedness is ≤ this.
+    pub max_curvedness: f32,
+    /// Default mode: maximum angle between a pixel's local normal and the region's normal.
+    pub max_angle_deg: f32,
+    /// Default mode: maximum distance of a pixel's 3D point to the region's plane, in camera units.
+    pub max_residual: f32,
+    /// Default mode: a pixel grows (or seeds) only if its local normal is within this angle of the
+    /// direction toward the sensor. Rejects the steep "walls" that local fits across depth jumps
+    /// produce (their curvature is tiny because of the gradient term in K and H).
+    pub max_slant_deg: f32,
+    /// Default mode: the region plane is refitted after `max(refit_every_px, n / 4)` additions.
+    pub refit_every_px: u32,
+    /// Default mode: adjacent regions merge only if their normals are within this angle.
+    pub merge_max_angle_deg: f32,
+    /// Default mode: adjacent regions merge only if each one's RMS distance to the other's plane
+    /// is ≤ this, in camera units.
+    pub merge_max_residual: f32,
+    /// Regions with fewer pixels become unlabelled (0).
+    pub min_region_px: u32,
+    /// Neighbourhood of growth and of the region adjacency graph: 4 or 8.
+    pub connectivity: u8,
+    /// Give left-over valid pixels to the adjacent region whose plane fits them (see crate docs).
+    pub fill_unlabelled: bool,
+    /// Maximum plane distance for `fill_unlabelled`, in camera units.
+    pub fill_max_residual: f32,
+    /// C1 one pixel thick (one side of each border) instead of both sides.
+    pub c1_one_sided: bool,
+}
+
+/// Defaults tuned on the 10 training images of the synthetic ABW-like benchmark
+/// (`examples/regions_eval.rs --tune`, Hoover T = 0.8).
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Default,
+            t_sigma: 0.02,
+            t_m: 0.02,
+            min_seeds: 1,
+            max_seeds: 10_000,
+            max_k_diff: 0.01,
+            max_curvedness: 1.0,
+            max_angle_deg: 20.0,
+            max_residual: 2.0,
+            max_slant_deg: 80.0,
+            refit_every_px: 16,
+            merge_max_angle_deg: 10.0,
+            merge_max_residual: 2.0,
+            min_region_px: 200,
+            connectivity: 4,
+            fill_unlabelled: true,
+            fill_max_residual: 2.0,
+            c1_one_sided: false,
+        }
+    }
+}
+
+impl Params {
+    /// The paper's faithful configuration: Gaussian-curvature growth and merge, no fill step
+    /// (`t_sigma`, `max_k_diff` tuned on the training split like the default mode).
+    pub fn paper() -> Self {
+        Self {
+            mode: Mode::Paper,
+            t_sigma: 0.005,
+            max_k_diff: 0.003,
+            fill_unlabelled: false,
+            ..Self::default()
+        }
+    }
+
+    /// Checks every value; the message names the offending field.
+    pub fn validate(&self) -> Result<(), String> {
+        let nonneg = [
+            ("t_sigma", self.t_sigma),
+            ("t_m", self.t_m),
+            ("max_k_diff", self.max_k_diff),
+            ("max_curvedness", self.max_curvedness),
+            ("max_residual", self.max_residual),
+            ("merge_max_residual", self.merge_max_residual),
+            ("fill_max_residual", self.fill_max_residual),
+        ];
+        for (name, v) in nonneg {
+            if v.is_nan() || v < 0.0 {
+                return Err(format!("regiongrow.{name} must be a number ≥ 0, got {v}"));
+            }
+        }
+        for (name, v) in
+            [("max_angle_deg", self.max_angle_deg), ("merge_max_angle_deg", self.merge_max_angle_deg)]
+        {
+            if !(0.0..=180.0).contains(&v) {
+                return Err(format!("regiongrow.{name} must be in 0..=180, got {v}"));
+            }
+        }
+        if !(0.0..=90.0).contains(&self.max_slant_deg) {
+            return Err(format!("regiongrow.max_slant_deg must be in 0..=90, got {}", self.max_slant_deg));
+        }
+        if self.max_seeds == 0 {
+            return Err("regiongrow.max_seeds must be ≥ 1".into());
+        }
+        if self.min_seeds > self.max_seeds {
+            return Err(format!(
+                "regiongrow.min_seeds ({}) must be ≤ max_seeds ({})",
+                self.min_seeds, self.max_seeds
+            ));
+        }
+        if self.refit_every_px == 0 {
+            return Err("regiongrow.refit_every_px must be ≥ 1".into());
+        }
+        if !matches!(self.connectivity, 4 | 8) {
+            return Err(format!("regiongrow.connectivity must be 4 or 8, got {}", self.connectivity));
+        }
+        Ok(())
+    }
+}
+
+/// Diagnostics of one [`grow`] call.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Info {
+    /// Seeds accepted (= regions grown).
+    pub n_seeds: u32,
+    /// Candidate pixels drawn (accepted or found already labelled).
+    pub n_draws: u32,
+    /// How many times `t_sigma` was doubled to reach `min_seeds`.
+    pub n_relaxations: u32,
+    /// The seed threshold finally used.
+    pub t_sigma_used: f32,
+    /// Regions after growth (before merging).
+    pub n_regions_grown: u32,
+    /// Merge operations performed.
+    pub n_merged: u32,
+    /// Merge passes over the region adjacency graph (the last one merges nothing).
+    pub n_merge_passes: u32,
+    /// Regions dropped for being under `min_region_px`.
+    pub n_dropped: u32,
+    /// Pixels given to a region by the fill step.
+    pub n_filled_px: u32,
+    /// Final number of regions.
+    pub n_regions: u32,
+    /// Valid (finite-range) pixels left unlabelled.
+    pub n_unlabelled_valid_px: u32,
+}
+
+/// The output of [`grow`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segmentation {
+    /// 0 = none, regions 1..=n numbered in raster order of their first pixel.
+    pub labels: LabelImage,
+    /// `regions[i]` describes label `i + 1`.
+    pub regions: Vec<Region>,
+    /// Region borders C1 (see [`borders`]).
+    pub c1: EdgeMap,
+}
+
+/// Segments `range` into regions by multi-seed region growing (see the crate docs).
+///
+/// # Panics
+/// If any grid of `features` differs in size from `range`, or if `params` fail
+/// [`Params::validate`].
+pub fn grow(
+    range: &RangeImage,
+    features: &SurfaceFeatures,
+    camera: &Camera,
+    params: &Params,
+    seed: u64,
+) -> (Segmentation, Info) {
+    let _s = tracing::info_span!("regiongrow", w = range.width(), h = range.height()).entered();
+    if let Err(e) = params.validate() {
+        panic!("regiongrow::grow: invalid params: {e}");
+    }
+    let need_sizes = [
+        ("k", features.k.same_size(range)),
+        ("k_std", features.k_std.same_size(range)),
+        ("curvedness", params.mode == Mode::Paper || features.curvedness.same_size(range)),
+        ("plane", params.mode == Mode::Paper || features.plane.same_size(range)),
+    ];
+    for (name, ok) in need_sizes {
+        assert!(ok, "regiongrow::grow: features.{name} differs in size from the range image");
+    }
+    grow::run(range, features, camera, params, seed)
+}
+
+/// Region border pixels C1 of a label image.
+///
+/// Two-sided (`one_sided = false`, the paper's C1): a pixel with label ≠ 0 is a border pixel if a
+/// 4-neighbour has a different label (including 0: unlabelled or no data). Label-0 pixels are never
+/// border pixels, and the image frame is not a border.
+///
+/// One-sided: between two regions only the upper/left pixel of each differing 4-neighbour pair is
+/// marked (the pixel whose right or lower neighbour has another non-zero label), giving a 1-pixel
+/// line; a labelled pixel next to label 0 is still marked (the 0 side cannot carry the border).
+pub fn borders(labels: &LabelImage, one_sided: bool) -> EdgeMap {
+    let (w, h) = labels.dimensions();
+    let l = labels.as_slice();
+    let (w, h) = (w as usize, h as usize);
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let a = l[i];
+            if a == 0 {
+                continue;
+            }
+            let right = (x + 1 < w).then(|| l[i + 1]);
+            let down = (y + 1 < h).then(|| l[i + w]);
+            let left = (x > 0).then(|| l[i - 1]);
+            let up = (y > 0).then(|| l[i - w]);
+            let border = if one_sided {
+                [right, down].into_iter().flatten().any(|b| b != a)
+                    || [left, up].into_iter().flatten().any(|b| b == 0)
+            } else {
+                [right, down, left, up].into_iter().flatten().any(|b| b != a)
+            };
+            out[i] = border;
+        }
+    }
+    Grid::from_vec(labels.width(), labels.height(), out).expect("same size")
+}
+
+#[cfg(test)]
+mod tests;

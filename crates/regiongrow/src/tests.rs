@@ -1,0 +1,270 @@
+//! Unit tests of `grow`, `borders` and `Params`.
+
+use super::*;
+use crate::testutil::{abw_like_scene, box_face, box_scene, canonical};
+use approx::assert_relative_eq;
+
+/// Pixels whose 5×5 neighbourhood lies entirely on face `f` of the box scene.
+fn interior(f: u32) -> Vec<(u32, u32)> {
+    let mut v = Vec::new();
+    for y in 2..62 {
+        for x in 2..62 {
+            if (0..5).all(|dy| (0..5).all(|dx| box_face(x + dx - 2, y + dy - 2) == f)) {
+                v.push((x, y));
+            }
+        }
+    }
+    v
+}
+
+/// The most frequent label over `px` and the fraction of `px` carrying it.
+fn majority(labels: &LabelImage, px: &[(u32, u32)]) -> (u32, f64) {
+    let mut counts = std::collections::BTreeMap::new();
+    for &p in px {
+        *counts.entry(labels[p]).or_insert(0u32) += 1;
+    }
+    let (l, c) = counts.into_iter().max_by_key(|&(l, c)| (c, std::cmp::Reverse(l))).unwrap();
+    (l, f64::from(c) / px.len() as f64)
+}
+
+fn small_params() -> Params {
+    Params { min_region_px: 20, ..Params::default() }
+}
+
+#[test]
+fn default_mode_separates_crease_and_jump() {
+    let s = box_scene();
+    let (seg, info) = grow(&s.range, &s.features, &Camera::Grid, &small_params(), 1);
+    let m: Vec<(u32, f64)> = (1..=3).map(|f| majority(&seg.labels, &interior(f))).collect();
+    for (f, &(l, frac)) in m.iter().enumerate() {
+        assert!(l != 0 && frac == 1.0, "face {}: label {l} on {frac} of its interior", f + 1);
+    }
+    assert!(m[0].0 != m[1].0 && m[1].0 != m[2].0 && m[0].0 != m[2].0, "faces share a label: {m:?}");
+    assert_eq!(info.n_regions, 3, "{info:?}");
+    assert_eq!(seg.regions.len(), 3);
+    // With the fill step every valid pixel of each face ends in its face's region, except at most
+    // the pixels right on the crease or the jump.
+    let mut wrong = 0;
+    for (x, y, &l) in seg.labels.enumerate() {
+        let f = box_face(x, y);
+        if f == 0 {
+            assert_eq!(l, 0);
+        } else if l != m[f as usize - 1].0 {
+            wrong += 1;
+        }
+    }
+    assert!(wrong <= 64, "{wrong} pixels off their face");
+}
+
+#[test]
+fn regions_carry_their_planes() {
+    let s = box_scene();
+    let (seg, _) = grow(&s.range, &s.features, &Camera::Grid, &small_params(), 1);
+    let label_a = majority(&seg.labels, &interior(1)).0;
+    let r = &seg.regions[label_a as usize - 1];
+    assert_eq!(r.label, label_a);
+    // Face A: z = 100 + 0.8 x + 0.2 y; Camera::Grid looks along +z, so the normal points to −z.
+    let n = (0.8f32 * 0.8 + 0.2 * 0.2 + 1.0).sqrt();
+    assert_relative_eq!(r.normal[0], 0.8 / n, epsilon = 0.02);
+    assert_relative_eq!(r.normal[1], 0.2 / n, epsilon = 0.02);
+    assert_relative_eq!(r.normal[2], -1.0 / n, epsilon = 0.02);
+    // offset: n·p + d = 0 at p = (0, 0, 100).
+    assert_relative_eq!(r.offset, 100.0 / n, epsilon = 1.0);
+    assert!(r.rms_residual < 0.5, "{r:?}");
+    assert!(r.mean_k.abs() < 1e-3);
+    let total: u32 = seg.regions.iter().map(|r| r.size_px).sum();
+    assert_eq!(total as usize, seg.labels.as_slice().iter().filter(|&&l| l != 0).count());
+}
+
+#[test]
+fn paper_mode_leaks_across_the_crease() {
+    // K ≈ 0 on the crease (one principal curvature is 0), so the paper's criterion cannot stop
+    // there; at the straight sides of the jump K ≈ 0 as well. Only the jump's corners have K ≠ 0.
+    let s = box_scene();
+    let params = Params { min_region_px: 20, ..Params::paper() };
+    let (seg, _) = grow(&s.range, &s.features, &Camera::Grid, &params, 1);
+    let a = majority(&seg.labels, &interior(1)).0;
+    let b = majority(&seg.labels, &interior(2)).0;
+    let c = majority(&seg.labels, &interior(3)).0;
+    assert!(a != 0 && a == b, "paper mode should merge the faces across the crease: {a} {b}");
+    assert_eq!(c, a, "paper mode also leaks across the jump's straight sides on this scene");
+}
+
+#[test]
+fn labels_are_zero_on_no_data() {
+    let s = box_scene();
+    for params in [small_params(), Params::paper()] {
+        let (seg, _) = grow(&s.range, &s.features, &Camera::Grid, &params, 3);
+        for (x, y, v) in s.range.enumerate() {
+            if v.is_nan() {
+                assert_eq!(seg.labels[(x, y)], 0);
+                assert!(!seg.c1[(x, y)]);
+            }
+        }
+    }
+}
+
+#[test]
+fn regions_under_min_size_are_dropped() {
+    let s = box_scene();
+    // The box top has 24 × 20 = 480 pixels (fewer after the growth margin).
+    for fill in [false, true] {
+        let params = Params { min_region_px: 600, fill_unlabelled: fill, ..Params::default() };
+        let (seg, info) = grow(&s.range, &s.features, &Camera::Grid, &params, 1);
+        assert!(info.n_dropped >= 1);
+        assert!(interior(3).iter().all(|&p| seg.labels[p] == 0), "fill = {fill}");
+        assert!(seg.regions.iter().all(|r| r.size_px >= 600));
+        assert_eq!(info.n_regions, 2);
+    }
+}
+
+#[test]
+fn same_seed_same_output_in_1_and_2_thread_pools() {
+    let s = abw_like_scene(96);
+    let params = Params { min_region_px: 30, ..Params::default() };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| grow(&s.range, &s.features, &Camera::ABW0, &params, 42))
+    };
+    let (a, ia) = run(1);
+    let (b, ib) = run(2);
+    assert_eq!(a.labels, b.labels);
+    assert_eq!(a.c1, b.c1);
+    assert_eq!(ia, ib);
+    let bits = |seg: &Segmentation| -> Vec<u32> {
+        seg.regions
+            .iter()
+            .flat_map(|r| {
+                [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
+                    .into_iter()
+                    .chain(r.normal.map(f32::to_bits))
+            })
+            .collect()
+    };
+    assert_eq!(bits(&a), bits(&b));
+    assert!(a.regions.len() >= 4, "{ia:?}");
+}
+
+#[test]
+fn clean_scene_partition_does_not_depend_on_the_seed() {
+    let s = box_scene();
+    let (a, _) = grow(&s.range, &s.features, &Camera::Grid, &small_params(), 1);
+    for seed in [2, 99, 12345] {
+        let (b, _) = grow(&s.range, &s.features, &Camera::Grid, &small_params(), seed);
+        assert_eq!(canonical(a.labels.as_slice()), canonical(b.labels.as_slice()), "seed {seed}");
+    }
+}
+
+#[test]
+fn too_few_seeds_relax_t_sigma() {
+    let s = abw_like_scene(64);
+    let params = Params { t_sigma: 1e-12, min_seeds: 3, min_region_px: 10, ..Params::default() };
+    let (seg, info) = grow(&s.range, &s.features, &Camera::ABW0, &params, 5);
+    assert!(info.n_relaxations >= 1, "{info:?}");
+    assert!(info.n_seeds >= 3, "{info:?}");
+    assert!(info.t_sigma_used > 1e-12);
+    assert!(!seg.regions.is_empty());
+    // Without the relaxation need, nothing is relaxed.
+    let (_, info) = grow(&s.range, &s.features, &Camera::ABW0, &Params::default(), 5);
+    assert_eq!((info.n_relaxations, info.t_sigma_used), (0, Params::default().t_sigma));
+}
+
+#[test]
+fn max_seeds_caps_the_regions_grown() {
+    let s = abw_like_scene(64);
+    let params = Params { max_seeds: 2, min_seeds: 1, min_region_px: 1, ..Params::default() };
+    let (_, info) = grow(&s.range, &s.features, &Camera::ABW0, &params, 5);
+    assert_eq!((info.n_seeds, info.n_regions_grown), (2, 2));
+}
+
+#[test]
+fn borders_both_sides_and_one_side() {
+    let labels = Grid::from_rows(vec![vec![1, 1, 2, 2], vec![1, 1, 2, 2], vec![0, 1, 2, 0]]).unwrap();
+    let two = borders(&labels, false);
+    let got: Vec<u8> = two.as_slice().iter().map(|&b| u8::from(b)).collect();
+    assert_eq!(got, vec![0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1, 0]);
+    let one = borders(&labels, true);
+    let got: Vec<u8> = one.as_slice().iter().map(|&b| u8::from(b)).collect();
+    // Region/region: only the left pixel of each pair; region/0: the labelled pixel.
+    assert_eq!(got, vec![0, 1, 0, 0, 1, 1, 0, 1, 0, 1, 1, 0]);
+    let labels = Grid::from_rows(vec![vec![1, 1, 2, 2]]).unwrap();
+    assert_eq!(borders(&labels, true).as_slice(), &[false, true, false, false]);
+    assert_eq!(borders(&labels, false).as_slice(), &[false, true, true, false]);
+}
+
+#[test]
+fn c1_is_the_border_of_the_labels() {
+    let s = box_scene();
+    for one_sided in [false, true] {
+        let params = Params { c1_one_sided: one_sided, ..small_params() };
+        let (seg, _) = grow(&s.range, &s.features, &Camera::Grid, &params, 1);
+        assert_eq!(seg.c1, borders(&seg.labels, one_sided));
+        assert!(seg.c1.as_slice().iter().any(|&b| b));
+    }
+}
+
+#[test]
+fn params_toml_round_trip_and_unknown_fields() {
+    let p = Params::paper();
+    let text = toml::to_string(&p).unwrap();
+    assert_eq!(toml::from_str::<Params>(&text).unwrap(), p);
+    let partial: Params = toml::from_str("mode = \"paper\"\nt_m = 0.5").unwrap();
+    assert_eq!(
+        (partial.mode, partial.t_m, partial.max_seeds),
+        (Mode::Paper, 0.5, Params::default().max_seeds)
+    );
+    assert!(toml::from_str::<Params>("t_mm = 0.5").is_err());
+    assert!(Params::default().validate().is_ok());
+    assert!(Params::paper().validate().is_ok());
+    let bad = [
+        Params { connectivity: 6, ..Params::default() },
+        Params { min_seeds: 10, max_seeds: 5, ..Params::default() },
+        Params { t_sigma: -1.0, ..Params::default() },
+        Params { max_residual: f32::NAN, ..Params::default() },
+        Params { max_angle_deg: 200.0, ..Params::default() },
+        Params { refit_every_px: 0, ..Params::default() },
+    ];
+    for b in bad {
+        assert!(b.validate().is_err(), "{b:?}");
+    }
+}
+
+#[test]
+fn eight_connectivity_also_separates_faces() {
+    let s = box_scene();
+    let params = Params { connectivity: 8, ..small_params() };
+    let (seg, info) = grow(&s.range, &s.features, &Camera::Grid, &params, 1);
+    assert_eq!(info.n_regions, 3, "{info:?}");
+    let m: Vec<u32> = (1..=3).map(|f| majority(&seg.labels, &interior(f)).0).collect();
+    assert!(m[0] != m[1] && m[1] != m[2] && m[0] != m[2] && !m.contains(&0));
+}
+
+mod proptests {
+    use super::*;
+    use proptest::prelude::*;
+    use rangeimage::testing::arbitrary_range_image;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        #[test]
+        fn proptest_labels_zero_where_nan(img in arbitrary_range_image(1..40, 1..40), seed in 0u64..1000) {
+            let f = crate::testutil::features(&img);
+            for params in [Params { min_region_px: 1, ..Params::default() }, Params { min_region_px: 1, ..Params::paper() }] {
+                let (seg, info) = grow(&img, &f, &Camera::ABW0, &params, seed);
+                prop_assert_eq!(seg.regions.len() as u32, info.n_regions);
+                for (x, y, v) in img.enumerate() {
+                    let l = seg.labels[(x, y)];
+                    if v.is_nan() {
+                        prop_assert_eq!(l, 0);
+                    }
+                    prop_assert!(l as usize <= seg.regions.len());
+                    prop_assert!(!seg.c1[(x, y)] || l != 0);
+                }
+                for (i, r) in seg.regions.iter().enumerate() {
+                    prop_assert_eq!(r.label as usize, i + 1);
+                    prop_assert!(r.size_px >= 1);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,162 @@
+//! Test and bench helpers: synthetic piecewise-planar range images and finite-difference features.
+//!
+//! This file is also compiled into `benches/regiongrow.rs` through `#[path]`, so it uses only
+//! `rangeimage` (the `features` stage is not a dependency of this crate).
+#![allow(dead_code)]
+
+use rangeimage::{Grid, RangeImage, SurfaceFeatures};
+
+/// A range image with its features.
+pub(crate) struct Scene {
+    /// Float range values (no quantisation).
+    pub(crate) range: RangeImage,
+    /// Features from [`features`].
+    pub(crate) features: SurfaceFeatures,
+}
+
+/// Finite-difference features over 3×3 windows (all 9 pixels must be finite, else NaN):
+/// plane slopes by least squares, second derivatives by central differences, K, H, principal
+/// curvatures, curvedness, and the std of K over the 3×3 window of finite K values.
+pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
+    let (w, h) = range.dimensions();
+    let nan3 = [f32::NAN; 3];
+    let (cx, cy) = ((w as f32 - 1.0) / 2.0, (h as f32 - 1.0) / 2.0);
+    let z = |x: i64, y: i64| range.get_signed(x, y).copied().unwrap_or(f32::NAN);
+    let window = |x: u32, y: u32| -> Option<[[f32; 3]; 3]> {
+        let mut m = [[0.0; 3]; 3];
+        for dy in 0..3 {
+            for dx in 0..3 {
+                let v = z(i64::from(x) + dx - 1, i64::from(y) + dy - 1);
+                if !v.is_finite() {
+                    return None;
+                }
+                m[dy as usize][dx as usize] = v;
+            }
+        }
+        Some(m)
+    };
+    let mut plane = Grid::new(w, h, nan3);
+    let mut gradient = Grid::new(w, h, [f32::NAN; 2]);
+    let mut hessian = Grid::new(w, h, nan3);
+    let mut k = Grid::new(w, h, f32::NAN);
+    let mut hm = Grid::new(w, h, f32::NAN);
+    let mut principal = Grid::new(w, h, [f32::NAN; 2]);
+    let mut curvedness = Grid::new(w, h, f32::NAN);
+    for y in 0..h {
+        for x in 0..w {
+            let Some(m) = window(x, y) else { continue };
+            let a = (0..3).map(|r| m[r][2] - m[r][0]).sum::<f32>() / 6.0;
+            let b = (0..3).map(|c| m[2][c] - m[0][c]).sum::<f32>() / 6.0;
+            let c = m[1][1] - a * (x as f32 - cx) - b * (y as f32 - cy);
+            let ixx = m[1][2] - 2.0 * m[1][1] + m[1][0];
+            let iyy = m[2][1] - 2.0 * m[1][1] + m[0][1];
+            let ixy = (m[2][2] - m[0][2] - m[2][0] + m[0][0]) / 4.0;
+            let g = 1.0 + a * a + b * b;
+            let kk = (ixx * iyy - ixy * ixy) / (g * g);
+            let hh = ((1.0 + b * b) * ixx - 2.0 * a * b * ixy + (1.0 + a * a) * iyy) / (2.0 * g.powf(1.5));
+            let disc = (hh * hh - kk).max(0.0).sqrt();
+            let (k1, k2) = (hh + disc, hh - disc);
+            plane[(x, y)] = [a, b, c];
+            gradient[(x, y)] = [a, b];
+            hessian[(x, y)] = [ixx, ixy, iyy];
+            k[(x, y)] = kk;
+            hm[(x, y)] = hh;
+            principal[(x, y)] = [k1, k2];
+            curvedness[(x, y)] = ((k1 * k1 + k2 * k2) / 2.0).sqrt();
+        }
+    }
+    let k_std = Grid::from_fn(w, h, |x, y| {
+        let (mut n, mut s, mut ss) = (0.0f64, 0.0f64, 0.0f64);
+        for dy in -1..=1i64 {
+            for dx in -1..=1i64 {
+                if let Some(&v) = k.get_signed(i64::from(x) + dx, i64::from(y) + dy)
+                    && v.is_finite()
+                {
+                    n += 1.0;
+                    s += f64::from(v);
+                    ss += f64::from(v) * f64::from(v);
+                }
+            }
+        }
+        if n == 0.0 { f32::NAN } else { ((ss / n - (s / n).powi(2)).max(0.0)).sqrt() as f32 }
+    });
+    SurfaceFeatures { plane, gradient, hessian, k, h: hm, principal, curvedness, k_std }
+}
+
+/// Which face of [`box_scene`] a pixel belongs to: 1 = face A, 2 = face B (crease with A at
+/// x = 31/32), 3 = the box top (jump), 0 = no data.
+pub(crate) fn box_face(x: u32, y: u32) -> u32 {
+    if (10..12).contains(&x) && (50..54).contains(&y) {
+        0
+    } else if x >= 44 && y >= 40 {
+        3
+    } else if x <= 31 {
+        1
+    } else {
+        2
+    }
+}
+
+/// 64×64 scene in `Camera::Grid` units: a roof of two faces meeting at a 72° crease, a box top
+/// in front of face B (depth jump of about 40), and a 2×4 patch of no data.
+pub(crate) fn box_scene() -> Scene {
+    let range = Grid::from_fn(64, 64, |x, y| {
+        let (xf, yf) = (x as f32, y as f32);
+        match box_face(x, y) {
+            0 => f32::NAN,
+            1 => 100.0 + 0.8 * xf + 0.2 * yf,
+            2 => 100.0 + 0.8 * 31.0 - 0.7 * (xf - 31.0) + 0.2 * yf,
+            _ => 60.0 + 0.1 * xf + 0.3 * yf,
+        }
+    });
+    let features = features(&range);
+    Scene { range, features }
+}
+
+/// A `side × side` ABW-like scene (raw range values, larger = farther, for `Camera::ABW0`):
+/// a background wall, a two-faced box with a crease and a shadow beside it, a ridge-shaped
+/// wedge and a small block, plus a deterministic ±0.05 ripple so K is not exactly zero.
+pub(crate) fn abw_like_scene(side: u32) -> Scene {
+    let s = side as f32;
+    let range = Grid::from_fn(side, side, |x, y| {
+        let (xf, yf) = (x as f32, y as f32);
+        let ripple = 0.05 * (((x.wrapping_mul(7919) ^ y.wrapping_mul(104_729)) % 97) as f32 / 48.0 - 1.0);
+        let (bx0, bx1, by0, by1) = (0.25 * s, 0.5 * s, 0.3 * s, 0.7 * s);
+        let v = if xf >= bx0 && xf < bx1 && yf >= by0 && yf < by1 {
+            let xc = 0.375 * s;
+            let across = if xf < xc { 0.4 * (xf - bx0) } else { 0.4 * (xc - bx0) - 0.4 * (xf - xc) };
+            120.0 - 0.5 * across + 0.1 * (yf - by0) * 128.0 / s
+        } else if xf >= bx1 && xf < bx1 + 0.03 * s && yf >= by0 && yf < by1 {
+            f32::NAN
+        } else if xf >= 0.6 * s && xf < 0.85 * s && yf >= 0.2 * s && yf < 0.5 * s {
+            100.0 + 0.3 * (yf - 0.35 * s).abs() * 256.0 / s
+        } else if xf >= 0.6 * s && xf < 0.7 * s && yf >= 0.7 * s && yf < 0.8 * s {
+            140.0 + 0.05 * xf * 256.0 / s
+        } else {
+            220.0 - 0.02 * xf * 512.0 / s
+        };
+        v + ripple
+    });
+    let features = features(&range);
+    Scene { range, features }
+}
+
+/// Labels renumbered 1.. in raster order of first appearance (0 stays 0).
+pub(crate) fn canonical(labels: &[u32]) -> Vec<u32> {
+    let max = labels.iter().copied().max().unwrap_or(0) as usize;
+    let mut map = vec![0u32; max + 1];
+    let mut next = 0;
+    labels
+        .iter()
+        .map(|&l| {
+            if l == 0 {
+                return 0;
+            }
+            if map[l as usize] == 0 {
+                next += 1;
+                map[l as usize] = next;
+            }
+            map[l as usize]
+        })
+        .collect()
+}
