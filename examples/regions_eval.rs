@@ -128,6 +128,43 @@ fn grid(mode: Mode) -> Vec<Params> {
     out
 }
 
+/// Training split only: every GT region with its best-overlapping MS region and the overlap
+/// fractions (of the GT region, of the MS region), flagged when under T = 0.8.
+fn missed_report(out: &mut impl Write, it: &Item, seg: &LabelImage) -> anyhow::Result<()> {
+    use std::collections::BTreeMap;
+    let mut gt_size: BTreeMap<u32, u64> = BTreeMap::new();
+    let mut ms_size: BTreeMap<u32, u64> = BTreeMap::new();
+    let mut pair: BTreeMap<(u32, u32), u64> = BTreeMap::new();
+    for (&g, &m) in it.gt.as_slice().iter().zip(seg.as_slice()) {
+        *ms_size.entry(m).or_default() += 1;
+        if g == 0 {
+            continue;
+        }
+        *gt_size.entry(g).or_default() += 1;
+        *pair.entry((g, m)).or_default() += 1;
+    }
+    for (&g, &gs) in &gt_size {
+        let (m, o) = pair
+            .range((g, 0)..=(g, u32::MAX))
+            .filter(|((_, m), _)| *m != 0)
+            .max_by_key(|(_, o)| **o)
+            .map(|((_, m), o)| (*m, *o))
+            .unwrap_or((0, 0));
+        let unl = pair.get(&(g, 0)).copied().unwrap_or(0);
+        let ms = ms_size.get(&m).copied().unwrap_or(0).max(1);
+        let (fg, fm) = (o as f64 / gs as f64, o as f64 / ms as f64);
+        if fg < 0.8 || fm < 0.8 {
+            writeln!(
+                out,
+                "  {} gt {g:>3} size {gs:>6} best ms {m:>3} size {ms:>6} overlap/gt {fg:.2} overlap/ms {fm:.2} unlabelled/gt {:.2}",
+                it.stem,
+                unl as f64 / gs as f64
+            )?;
+        }
+    }
+    Ok(())
+}
+
 fn main() -> anyhow::Result<()> {
     let mut split = String::from("train");
     let mut mode = Mode::Default;
@@ -159,6 +196,7 @@ fn main() -> anyhow::Result<()> {
         _ => bail!("--split train|test"),
     };
     let mut out = std::io::stdout().lock();
+    let diag = std::env::var_os("REGIONS_EVAL_DIAG").is_some();
     let base = if mode == Mode::Paper { Params::paper() } else { Params::default() };
     let params = if tune {
         let train = load(&data, false)?;
@@ -182,10 +220,41 @@ fn main() -> anyhow::Result<()> {
         let (_, p, _) = best.context("empty grid")?;
         writeln!(out, "chosen on train:\n{}", toml::to_string(&p)?)?;
         p
+    } else if let Some(extra) = std::env::var_os("REGIONS_EVAL_PARAMS") {
+        // Overrides as a TOML table body, e.g. "seed_radius_px = 1" (exploration on train).
+        let mut t: toml::Table = toml::from_str(&toml::to_string(&base)?)?;
+        t.extend(toml::from_str::<toml::Table>(&extra.to_string_lossy())?);
+        let p: Params = t.try_into()?;
+        writeln!(out, "params: {p:?}")?;
+        p
     } else {
         base
     };
     let items = load(&data, test)?;
+    // Single-threaded wall time of `grow` per image (measurement only).
+    let mut fastest = std::time::Duration::MAX;
+    let mut total = std::time::Duration::ZERO;
+    for it in &items {
+        let t0 = std::time::Instant::now();
+        let (_, info) = regiongrow::grow(&it.range, &it.features, &it.camera, &params, seed);
+        let dt = t0.elapsed();
+        fastest = fastest.min(dt);
+        total += dt;
+        if diag {
+            writeln!(out, "{} {info:?} {dt:.2?}", it.stem)?;
+        }
+    }
+    writeln!(
+        out,
+        "grow, one thread: mean {:.2?}, fastest {fastest:.2?} per image",
+        total / items.len() as u32
+    )?;
+    if diag && !test {
+        for it in &items {
+            let (seg, _) = regiongrow::grow(&it.range, &it.features, &it.camera, &params, seed);
+            missed_report(&mut out, it, &seg.labels)?;
+        }
+    }
     let t0 = std::time::Instant::now();
     let (m, scores) = score(&items, &params, seed);
     let dt = t0.elapsed();

@@ -142,36 +142,49 @@ pub(crate) fn run(
     let mut cand: Vec<u32> = Vec::new();
     let mut t = params.t_sigma;
     let mut next = 1u32;
+    let stride = params.seed_stride_px as usize;
+    let off = stride / 2;
+    // Unlabelled growable pixels left; seeding stops when fewer than a kept region remain.
+    let mut left = ctx.growable.iter().filter(|&&g| g).count();
+    let min_left = (params.min_region_px as usize).max(1);
     for round in 0..=MAX_RELAXATIONS {
-        let t_round = if round == MAX_RELAXATIONS && round > 0 { f32::INFINITY } else { t };
+        let last = round == MAX_RELAXATIONS && round > 0;
+        let t_round = if last { f32::INFINITY } else { t };
+        // The last round falls back to every pixel and no neighbourhood test.
+        let (st, of, radius) = if last { (1, 0, 0) } else { (stride, off, params.seed_radius_px as usize) };
         cand.clear();
-        cand.extend((0..n as u32).filter(|&i| {
-            let i = i as usize;
-            labels[i] == 0 && ctx.growable[i] && k_std[i] <= t_round
-        }));
+        for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
+            for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
+                let i = y * w + x;
+                if labels[i] == 0 && ctx.growable[i] && k_std[i] <= t_round {
+                    cand.push(i as u32);
+                }
+            }
+        }
         for i in (1..cand.len()).rev() {
             let j = rng.random_range(0..=i as u32) as usize;
             cand.swap(i, j);
         }
         for &c in &cand {
-            if info.n_seeds >= params.max_seeds {
+            if info.n_seeds >= params.max_seeds || left < min_left {
                 break;
             }
             info.n_draws += 1;
-            if labels[c as usize] != 0 {
+            let c = c as usize;
+            if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, &labels) {
                 continue;
             }
-            if paper {
-                grow_paper(&ctx, params, c as usize, next, &mut labels, &mut queue);
+            let grown = if paper {
+                grow_paper(&ctx, params, c, next, &mut labels, &mut queue)
             } else {
-                grow_default(&ctx, params, c as usize, next, &mut labels, &mut queue);
-            }
+                grow_default(&ctx, params, c, next, &mut labels, &mut queue)
+            };
+            left -= grown;
             next += 1;
             info.n_seeds += 1;
         }
         info.t_sigma_used = t_round;
-        let any_left = (0..n).any(|i| labels[i] == 0 && ctx.growable[i]);
-        if info.n_seeds >= params.min_seeds || info.n_seeds >= params.max_seeds || !any_left {
+        if info.n_seeds >= params.min_seeds || info.n_seeds >= params.max_seeds || left == 0 {
             break;
         }
         info.n_relaxations += 1;
@@ -291,7 +304,7 @@ fn grow_default(
     id: u32,
     labels: &mut [u32],
     queue: &mut Vec<u32>,
-) {
+) -> usize {
     let (w, h) = (ctx.w, ctx.h);
     let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
     let max_res = f64::from(params.max_residual);
@@ -333,6 +346,7 @@ fn grow_default(
             }
         }
     }
+    count
 }
 
 /// Paper mode: grows region `id` from `seed`; a neighbour joins if its K is within
@@ -344,7 +358,7 @@ fn grow_paper(
     id: u32,
     labels: &mut [u32],
     queue: &mut Vec<u32>,
-) {
+) -> usize {
     let (w, h) = (ctx.w, ctx.h);
     let max_dk = f64::from(params.max_k_diff);
     queue.clear();
@@ -371,6 +385,49 @@ fn grow_paper(
             count += 1.0;
         }
     }
+    count as usize
+}
+
+/// Whether `c` may seed: every pixel of its `(2·radius+1)²` window lies in the image, is unlabelled
+/// and growable, and passes the growth test of the mode against the seed's own local plane (default
+/// mode) or K (paper mode). Rejects seeds on noise, near depth jumps and on creases.
+fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u32]) -> bool {
+    if radius == 0 {
+        return true;
+    }
+    let (w, h) = (ctx.w, ctx.h);
+    let (x, y) = (c % w, c / w);
+    if x < radius || y < radius || x + radius >= w || y + radius >= h {
+        return false;
+    }
+    let paper = ctx.normals.is_empty();
+    let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
+    let max_res = f64::from(params.max_residual);
+    let max_dk = params.max_k_diff;
+    let kc = ctx.k[c];
+    let plane = (!paper).then(|| Plane::through(f64x3(ctx.pts[c]), f64x3(ctx.normals[c])));
+    for yy in y - radius..=y + radius {
+        for j in yy * w + x - radius..=yy * w + x + radius {
+            if labels[j] != 0 || !ctx.growable[j] {
+                return false;
+            }
+            match &plane {
+                None => {
+                    if (ctx.k[j] - kc).abs() > max_dk {
+                        return false;
+                    }
+                }
+                Some(pl) => {
+                    if pl.distance(f64x3(ctx.pts[j])).abs() > max_res
+                        || dot(f64x3(ctx.normals[j]), pl.normal).abs() < cos_max
+                    {
+                        return false;
+                    }
+                }
+            }
+        }
+    }
+    true
 }
 
 /// Gives unlabelled valid pixels to the 4-adjacent region whose plane is nearest (if within
