@@ -5,10 +5,12 @@
 //! relax → final segmentation, all with default parameters except the relax ones given here.
 //! Reports boundary P/R/F (one-to-one matching, τ = 2) for C1, C2 and the relaxed C = C1 ∪ C2,
 //! the paper's precision against C1 (τ = 2) before and after relaxation, and Hoover correct
-//! detections at T = 0.8 for region growing alone vs the final segmentation.
+//! detections at T = 0.8 for region growing alone vs the final segmentation, and Hoover
+//! correct / over / under for region growing and the final segmentation in both modes.
 //!
 //! ```text
-//! cargo run --release --example relax_eval -- [--s1 curvedness|k] [--t-d 3] [--lambda 1] [--gap 2] [--min-region 50] [--tune]
+//! cargo run --release --example relax_eval -- [--s1 curvedness|k] [--t-d 3] [--lambda 1] [--delta 0.7] [--sweeps 7] [--gap 2] [--min-region 50]
+//!     [--mode regions|components] [--no-unlabelled-core] [--support 0.3] [--merge-angle 10] [--merge-residual 2] [--tune]
 //! ```
 //! `--tune` sweeps `t_d_px × lambda` on the training split and prints one summary line per pair.
 #![allow(clippy::print_stdout)] // an example reports on stdout
@@ -37,6 +39,8 @@ struct Row {
     pp_c2: f64,
     pp_c2_relaxed: f64,
     pp_final: f64,
+    /// (correct, over, under) at T = 0.8 for region growing, Components mode, Regions mode.
+    hoover: [[u32; 3]; 3],
     hoover_rg: u32,
     hoover_final: u32,
     gt_regions: u32,
@@ -71,12 +75,23 @@ fn prepare(index: u32, use_k: bool) -> Prepared {
 
 fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams) -> Row {
     let (r, info) = relax::relax(&p.c1, &p.s1, &p.c2, &p.magnitude, &p.valid, params, 0);
-    let (labels, regions) = relax::final_segmentation(&p.range, &p.camera, &r.edges, sp);
+    let (labels, regions) = relax::final_segmentation(&p.range, &p.camera, &r.edges, Some(&p.rg_labels), sp);
+    let other_mode = match sp.mode {
+        relax::SegmentMode::Regions => relax::SegmentMode::Components,
+        relax::SegmentMode::Components => relax::SegmentMode::Regions,
+    };
+    let sp_other = relax::SegmentParams { mode: other_mode, ..sp.clone() };
+    let (labels_other, _) =
+        relax::final_segmentation(&p.range, &p.camera, &r.edges, Some(&p.rg_labels), &sp_other);
     let f = |e: &EdgeMap| eval::boundary::matched(e, &p.gt, 2.0).f;
     let pp = |e: &EdgeMap| eval::paper_precision(e, &p.c1, 2.0).unwrap_or(f64::NAN);
     let nz = eval::Convention::NonZero;
     let h_rg = eval::hoover::compare_with(&p.gt, &p.rg_labels, 0.8, None, None, nz);
     let h_final = eval::hoover::compare_with(&p.gt, &labels, 0.8, None, None, nz);
+    let h_other = eval::hoover::compare_with(&p.gt, &labels_other, 0.8, None, None, nz);
+    let (h_comp, h_reg) =
+        if sp.mode == relax::SegmentMode::Regions { (&h_other, &h_final) } else { (&h_final, &h_other) };
+    let cou = |h: &eval::hoover::HooverScore| [h.correct, h.over, h.under];
     Row {
         f_c1: f(&p.c1),
         f_c2: f(&p.c2),
@@ -84,6 +99,7 @@ fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams) -> 
         pp_c2: pp(&p.c2),
         pp_c2_relaxed: pp(&r.c2),
         pp_final: pp(&r.edges),
+        hoover: [cou(&h_rg), cou(h_comp), cou(h_reg)],
         hoover_rg: h_rg.correct,
         hoover_final: h_final.correct,
         gt_regions: h_rg.gt_regions,
@@ -110,12 +126,26 @@ fn main() -> Result<()> {
             "--s1" => use_k = value("--s1")? == "k",
             "--t-d" => params.t_d_px = value("--t-d")?.parse()?,
             "--lambda" => params.lambda = value("--lambda")?.parse()?,
+            "--delta" => params.cooling_delta = value("--delta")?.parse()?,
+            "--sweeps" => params.max_sweeps = value("--sweeps")?.parse()?,
             "--gap" => sp.gap_close_px = value("--gap")?.parse()?,
             "--min-region" => sp.min_region_px = value("--min-region")?.parse()?,
+            "--mode" => {
+                sp.mode = match value("--mode")?.as_str() {
+                    "components" => relax::SegmentMode::Components,
+                    "regions" => relax::SegmentMode::Regions,
+                    m => bail!("unknown mode {m}"),
+                }
+            }
+            "--no-unlabelled-core" => sp.unlabelled_core = false,
+            "--support" => sp.min_border_support = value("--support")?.parse()?,
+            "--merge-angle" => sp.merge_max_angle_deg = value("--merge-angle")?.parse()?,
+            "--merge-residual" => sp.merge_max_residual = value("--merge-residual")?.parse()?,
             _ => bail!("unknown argument {a}"),
         }
     }
     params.validate().map_err(anyhow::Error::msg)?;
+    sp.validate().map_err(anyhow::Error::msg)?;
     let images: Vec<Prepared> = (0..10u32).into_par_iter().map(|i| prepare(i, use_k)).collect();
     println!("s1 = {}", if use_k { "|K|" } else { "curvedness" });
     if tune {
@@ -177,5 +207,10 @@ fn main() -> Result<()> {
         mean(rows.iter().map(|r| f64::from(r.hoover_rg))),
         mean(rows.iter().map(|r| f64::from(r.hoover_final))),
     );
+    let h = |m: usize, k: usize| mean(rows.iter().map(|r| f64::from(r.hoover[m][k])));
+    println!("Hoover T = 0.8, mean per image (correct / over / under):");
+    for (m, name) in ["region growing", "final, components", "final, regions"].iter().enumerate() {
+        println!("  {name:<18} {:.2} / {:.2} / {:.2}", h(m, 0), h(m, 1), h(m, 2));
+    }
     Ok(())
 }

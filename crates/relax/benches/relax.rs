@@ -48,5 +48,5 @@ fn final_segmentation(b: divan::Bencher, side: u32) {
     let range: RangeImage =
         Grid::from_fn(side, side, |x, y| 100.0 + ((x / (side / 8)) * 3 + (y / (side / 8))) as f32);
     let params = relax::SegmentParams::default();
-    b.bench(|| relax::final_segmentation(&range, &rangeimage::Camera::ABW0, &c.c1, &params));
+    b.bench(|| relax::final_segmentation(&range, &rangeimage::Camera::ABW0, &c.c1, None, &params));
 }

@@ -70,6 +70,8 @@ pub(crate) struct State {
     n1: usize,
     /// Offsets within the cap, sorted by squared distance: (linear delta, d², dx, dy).
     disk: Vec<(isize, u16, i32, i32)>,
+    /// `start[d]` = index of the first `disk` entry with squared distance ≥ d (d ≤ cap2 + 1).
+    start: Vec<u32>,
     nbr: [(isize, i32, i32); 8],
     /// Per move direction: the offsets (relative to the target b) of the disk around b that
     /// are outside the disk around the source a, with their squared distance to b.
@@ -116,6 +118,7 @@ impl State {
             pos: Vec::new(),
             n1: 0,
             disk: Vec::new(),
+            start: Vec::new(),
             nbr: [(0, 0, 0); 8],
             fresh: Default::default(),
             term,
@@ -135,6 +138,9 @@ impl State {
             }
         }
         st.disk.sort_by_key(|&(_, d2, dx, dy)| (d2, dy, dx));
+        st.start = (0..=st.term.cap2 + 1)
+            .map(|d| st.disk.iter().position(|e| u32::from(e.1) >= d).unwrap_or(st.disk.len()) as u32)
+            .collect();
         let mut k = 0;
         for dy in -1i32..=1 {
             for dx in -1i32..=1 {
@@ -205,7 +211,14 @@ impl State {
     /// Squared distance from padded cell `p` to the nearest C2 point within the cap, or `FAR16`.
     #[inline]
     fn nearest(&self, p: usize) -> u16 {
-        for &(off, d2, _, _) in &self.disk {
+        self.nearest_from(p, 0)
+    }
+
+    /// [`State::nearest`] when no C2 point is known to be closer than squared distance `from`
+    /// (`from ≤ cap2`): the search skips the disk entries below it.
+    #[inline]
+    fn nearest_from(&self, p: usize, from: u16) -> u16 {
+        for &(off, d2, _, _) in &self.disk[self.start[usize::from(from)] as usize..] {
             if self.flags[(p as isize + off) as usize] & OCC2 != 0 {
                 return d2;
             }
@@ -271,11 +284,16 @@ impl State {
                 if old == EMPTY {
                     continue;
                 }
-                let new = if old == da2 {
-                    self.nearest(p)
+                let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
+                let new = if db2 <= cap2 && (db2 as u16) <= old {
+                    // b is at least as close as the old nearest: nothing else can be closer.
+                    db2 as u16
+                } else if old == da2 {
+                    // The moved point may have been the (only) nearest; every other C2 point is
+                    // at squared distance ≥ old, so search from there.
+                    self.nearest_from(p, old)
                 } else {
-                    let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
-                    if db2 <= cap2 && (db2 as u16) < old { db2 as u16 } else { old }
+                    old
                 };
                 if new != old {
                     self.scratch.push((p as u32, new));

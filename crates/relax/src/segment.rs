@@ -1,12 +1,28 @@
-//! The final segmentation from the relaxed edge map (SPEC §3.4 step 4).
+//! The final segmentation from the relaxed edge map (SPEC §3.4 step 4), optionally guided by
+//! the region-growing labels and merged where the relaxed edges do not support a border.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
+use std::collections::BTreeMap;
+
+/// How [`final_segmentation`] forms its regions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SegmentMode {
+    /// SPEC literal: connected components of valid non-edge pixels, filled by best plane.
+    Components,
+    /// Components that also never cross a region-growing border, then adjacent regions merged
+    /// where the relaxed edges do not support their border and their planes agree.
+    Regions,
+}
 
 /// The `[segment]` parameters of [`final_segmentation`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SegmentParams {
+    /// Region formation (`regions` needs the region-growing labels; without them it falls back
+    /// to `components`).
+    pub mode: SegmentMode,
     /// Connected components (of core pixels) smaller than this are dropped (their pixels are
     /// then filled from adjacent regions like edge pixels).
     pub min_region_px: u32,
@@ -14,11 +30,31 @@ pub struct SegmentParams {
     /// from every edge pixel (Euclidean); 0 = every non-edge pixel. A positive value closes gaps
     /// up to about twice as wide in the edge contours, which Canny edges and pruned borders have.
     pub gap_close_px: f64,
+    /// `regions` mode: pixels that region growing left unlabelled (0) may be core pixels too,
+    /// connected only among themselves (so faces region growing missed can still be found);
+    /// `false` = they are only filled from adjacent regions.
+    pub unlabelled_core: bool,
+    /// `regions` mode: two adjacent regions may merge only if less than this fraction of their
+    /// border pixels lie within 1 px (8-neighbourhood) of an edge pixel. In 0..=1.
+    pub min_border_support: f64,
+    /// `regions` mode: largest angle between the two regions' 3D plane normals for a merge.
+    pub merge_max_angle_deg: f64,
+    /// `regions` mode: largest RMS distance of each region's core points to the other region's
+    /// plane for a merge, in sensor units (ABW: about 1.3 units per range step).
+    pub merge_max_residual: f64,
 }
 
 impl Default for SegmentParams {
     fn default() -> Self {
-        Self { min_region_px: 50, gap_close_px: 2.0 }
+        Self {
+            mode: SegmentMode::Regions,
+            min_region_px: 50,
+            gap_close_px: 2.0,
+            unlabelled_core: true,
+            min_border_support: 0.3,
+            merge_max_angle_deg: 10.0,
+            merge_max_residual: 2.0,
+        }
     }
 }
 
@@ -31,7 +67,80 @@ impl SegmentParams {
         if !(self.gap_close_px.is_finite() && (0.0..=64.0).contains(&self.gap_close_px)) {
             return Err(format!("segment.gap_close_px must be in 0..=64, got {}", self.gap_close_px));
         }
+        if !(0.0..=1.0).contains(&self.min_border_support) {
+            return Err(format!(
+                "segment.min_border_support must be in 0..=1, got {}",
+                self.min_border_support
+            ));
+        }
+        if !(0.0..=90.0).contains(&self.merge_max_angle_deg) {
+            return Err(format!(
+                "segment.merge_max_angle_deg must be in 0..=90, got {}",
+                self.merge_max_angle_deg
+            ));
+        }
+        if !(self.merge_max_residual.is_finite() && self.merge_max_residual >= 0.0) {
+            return Err(format!(
+                "segment.merge_max_residual must be finite and ≥ 0, got {}",
+                self.merge_max_residual
+            ));
+        }
         Ok(())
+    }
+}
+
+/// First and second moments of a 3D point set.
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    n: f64,
+    s: [f64; 3],
+    /// xx, xy, xz, yy, yz, zz.
+    ss: [f64; 6],
+}
+
+impl Moments {
+    fn add(&mut self, p: [f64; 3]) {
+        self.n += 1.0;
+        for k in 0..3 {
+            self.s[k] += p[k];
+        }
+        let [x, y, z] = p;
+        for (acc, v) in self.ss.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
+            *acc += v;
+        }
+    }
+
+    fn merge(&mut self, o: &Moments) {
+        self.n += o.n;
+        for k in 0..3 {
+            self.s[k] += o.s[k];
+        }
+        for k in 0..6 {
+            self.ss[k] += o.ss[k];
+        }
+    }
+
+    fn mean(&self) -> [f64; 3] {
+        let n = self.n.max(1.0);
+        self.s.map(|v| v / n)
+    }
+
+    /// Covariance matrix (divided by n).
+    fn cov(&self) -> Matrix3<f64> {
+        let n = self.n.max(1.0);
+        let c = self.mean();
+        let e = |k: usize, a: usize, b: usize| self.ss[k] / n - c[a] * c[b];
+        let (xx, xy, xz, yy, yz, zz) =
+            (e(0, 0, 0), e(1, 0, 1), e(2, 0, 2), e(3, 1, 1), e(4, 1, 2), e(5, 2, 2));
+        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+    }
+
+    /// Mean squared distance of the points to `plane`.
+    fn mean_sq_residual(&self, plane: &Plane) -> f64 {
+        let nv = Vector3::from(plane.normal);
+        let c = self.mean();
+        let along = plane.normal[0] * c[0] + plane.normal[1] * c[1] + plane.normal[2] * c[2] + plane.offset;
+        ((nv.transpose() * self.cov() * nv)[0]).max(0.0) + along * along
     }
 }
 
@@ -49,23 +158,11 @@ impl Plane {
     }
 }
 
-/// Least-squares plane through `pts` (smallest eigenvector of the scatter matrix), with the
-/// normal oriented toward the sensor.
-fn fit_plane(pts: &[[f64; 3]], camera: &Camera) -> Plane {
-    let n = pts.len().max(1) as f64;
-    let mut c = [0.0f64; 3];
-    for p in pts {
-        for i in 0..3 {
-            c[i] += p[i];
-        }
-    }
-    c = c.map(|v| v / n);
-    let mut m = Matrix3::<f64>::zeros();
-    for p in pts {
-        let d = Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        m += d * d.transpose();
-    }
-    let eig = SymmetricEigen::new(m);
+/// Least-squares plane of the points summarised by `m` (smallest eigenvector of the
+/// covariance), with the normal oriented toward the sensor.
+fn fit_plane(m: &Moments, camera: &Camera) -> Plane {
+    let c = m.mean();
+    let eig = SymmetricEigen::new(m.cov());
     let mut k = 0;
     for i in 1..3 {
         if eig.eigenvalues[i] < eig.eigenvalues[k] {
@@ -81,50 +178,86 @@ fn fit_plane(pts: &[[f64; 3]], camera: &Camera) -> Plane {
     }
     let offset = -(normal[0] * c[0] + normal[1] * c[1] + normal[2] * c[2]);
     let mut plane = Plane { normal, offset, rms: 0.0 };
-    let ss: f64 = pts.iter().map(|&p| plane.residual(p).powi(2)).sum();
-    plane.rms = (ss / n).sqrt();
+    plane.rms = m.mean_sq_residual(&plane).sqrt();
     plane
+}
+
+fn find(parent: &mut [u32], mut a: u32) -> u32 {
+    while parent[a as usize] != a {
+        parent[a as usize] = parent[parent[a as usize] as usize];
+        a = parent[a as usize];
+    }
+    a
 }
 
 const NBR8: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
 
-/// Labels the image from the final edge map: 4-connected components of valid core pixels
-/// (non-edge pixels farther than `gap_close_px` from every edge pixel; with 0, all non-edge
-/// pixels), components under `min_region_px` dropped, then every remaining valid unlabelled pixel
-/// (edge pixels, the margin around them, dropped components) given to the 8-adjacent region whose plane fits its 3D point
-/// best, ring by ring outward from the regions (each ring decided from the previous rings only,
-/// ties to the smaller label, so the result does not depend on visiting order). Valid pixels
-/// not connected to any region stay 0; NaN pixels always stay 0.
+/// Labels the image from the final edge map `edges` (C = C1 ∪ C2).
+///
+/// 1. Core pixels: valid pixels farther than `gap_close_px` from every edge pixel (with 0, all
+///    non-edge valid pixels); in `regions` mode with `unlabelled_core = false` also labelled
+///    (≠ 0) in `regions`.
+/// 2. 4-connected components of core pixels; in `regions` mode two neighbours connect only if
+///    their region-growing labels are equal, so no component crosses a region-growing border
+///    (but edges inside a region may split it). Components under `min_region_px` are dropped.
+/// 3. Every remaining valid unlabelled pixel (edge pixels, the margin around them, dropped
+///    components, pixels region growing left unlabelled) is given to the 8-adjacent region
+///    whose plane fits its 3D point best, ring by ring outward from the regions (each ring
+///    decided from the previous rings only, ties to the smaller label, so the result does not
+///    depend on visiting order). Valid pixels not connected to any region stay 0; NaN pixels
+///    always stay 0.
+/// 4. `regions` mode only: adjacent regions whose border is supported by C on less than
+///    `min_border_support` of its pixels (a border pixel is supported if it is within 1 px,
+///    8-neighbourhood, of an edge pixel) and whose planes agree (normal angle ≤
+///    `merge_max_angle_deg`, RMS distance of each one's core points to the other's plane ≤
+///    `merge_max_residual`) are merged: union-find over the adjacent pairs in sorted order,
+///    planes refitted on merge, passes repeated until none merges (support is per original
+///    pair; the plane test uses the current merged groups).
+///
+/// `regions = None` makes `regions` mode behave as `components`.
 ///
 /// Labels are consecutive from 1 in raster order of first appearance. Each [`Region`] carries
 /// its final size, and the plane (unit normal toward the sensor, offset, RMS residual) fitted in
-/// 3D through `camera.point` on its component's core pixels only (edge pixels include mixed
-/// pixels at jumps, which would bias the fit). `mean_k` is `NaN`: curvature is not an input here.
+/// 3D through `camera.point` on its core pixels only (edge pixels include mixed pixels at jumps,
+/// which would bias the fit). `mean_k` is `NaN`: curvature is not an input here.
 ///
 /// # Panics
-/// If `range` and `edges` differ in size.
+/// If `range`, `edges` and `regions` differ in size.
 pub fn final_segmentation(
     range: &RangeImage,
     camera: &Camera,
     edges: &EdgeMap,
+    regions: Option<&LabelImage>,
     params: &SegmentParams,
 ) -> (LabelImage, Vec<Region>) {
     let _s = tracing::info_span!("final_segmentation", w = range.width(), h = range.height()).entered();
     assert!(range.same_size(edges), "relax::final_segmentation: range and edges differ in size");
+    if let Some(l) = regions {
+        assert!(range.same_size(l), "relax::final_segmentation: range and regions differ in size");
+    }
+    let guide = match params.mode {
+        SegmentMode::Regions => regions.map(|l| l.as_slice()),
+        SegmentMode::Components => None,
+    };
     let (w, h) = (range.width() as usize, range.height() as usize);
     let r = range.as_slice();
-    let e = edges.as_slice();
     let valid: Vec<bool> = r.iter().map(|v| v.is_finite()).collect();
     // "Edge" below means "not a core pixel": an edge pixel or within gap_close_px of one.
-    let e: Vec<bool> = if params.gap_close_px > 0.0 {
+    let mut e: Vec<bool> = if params.gap_close_px > 0.0 {
         let g2 = params.gap_close_px * params.gap_close_px;
         crate::edt::squared_edt(edges).as_slice().iter().map(|&d| d <= g2).collect()
     } else {
-        e.to_vec()
+        edges.as_slice().to_vec()
     };
+    if let (Some(g), false) = (guide, params.unlabelled_core) {
+        for (ei, &l) in e.iter_mut().zip(g) {
+            *ei |= l == 0;
+        }
+    }
     let point = |i: usize| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i]));
+    let same = |i: usize, j: usize| guide.is_none_or(|g| g[i] == g[j]);
 
-    // 1. 4-connected components of valid non-edge pixels, in raster order of their first pixel.
+    // 1. 4-connected components of core pixels, in raster order of their first pixel.
     let mut comp = vec![0u32; w * h];
     let mut members: Vec<Vec<usize>> = Vec::new();
     let mut stack = Vec::new();
@@ -140,7 +273,7 @@ pub fn final_segmentation(
             list.push(i);
             let (x, y) = (i % w, i / w);
             let mut visit = |j: usize| {
-                if valid[j] && !e[j] && comp[j] == 0 {
+                if valid[j] && !e[j] && comp[j] == 0 && same(i, j) {
                     comp[j] = id;
                     stack.push(j);
                 }
@@ -163,16 +296,19 @@ pub fn final_segmentation(
     }
 
     // 2. Drop small components; fit a plane to every kept one.
+    let mut moments: Vec<Moments> = vec![Moments::default(); members.len()];
     let mut planes: Vec<Option<Plane>> = Vec::with_capacity(members.len());
-    for list in &members {
+    for (list, m) in members.iter().zip(&mut moments) {
         if (list.len() as u64) < u64::from(params.min_region_px) {
             planes.push(None);
             for &i in list {
                 comp[i] = 0;
             }
         } else {
-            let pts: Vec<[f64; 3]> = list.iter().filter_map(|&i| point(i)).collect();
-            planes.push(Some(fit_plane(&pts, camera)));
+            for p in list.iter().filter_map(|&i| point(i)) {
+                m.add(p);
+            }
+            planes.push(Some(fit_plane(m, camera)));
         }
     }
 
@@ -228,18 +364,24 @@ pub fn final_segmentation(
         next.sort_unstable();
         ring = next;
     }
-    tracing::debug!(components = members.len(), rings, "filled");
+    tracing::debug!(components = planes.len(), rings, "filled");
 
-    // 4. Consecutive labels in raster order; region statistics.
-    let mut map = vec![0u32; members.len() + 1];
+    // 4. Merge adjacent regions over unsupported borders with agreeing planes.
+    let mut parent: Vec<u32> = (0..=planes.len() as u32).collect();
+    if guide.is_some() {
+        merge_unsupported(&comp, edges, w, h, &mut parent, &mut moments, &mut planes, camera, params);
+    }
+
+    // 5. Consecutive labels in raster order; region statistics.
+    let mut map = vec![0u32; planes.len() + 1];
     let mut sizes: Vec<u32> = Vec::new();
     let mut order: Vec<u32> = Vec::new();
     let mut labels = vec![0u32; w * h];
     for i in 0..w * h {
-        let c = comp[i] as usize;
-        if c == 0 {
+        if comp[i] == 0 {
             continue;
         }
+        let c = find(&mut parent, comp[i]) as usize;
         if map[c] == 0 {
             order.push(c as u32);
             sizes.push(0);
@@ -266,6 +408,95 @@ pub fn final_segmentation(
         .collect();
     let labels = Grid::from_vec(w as u32, h as u32, labels).expect("size matches");
     (labels, regions)
+}
+
+/// Step 4 of [`final_segmentation`]: union-find merging of adjacent components (labels in
+/// `comp`, 1-based into `moments`/`planes`) over borders weakly supported by `edges`. Roots are
+/// the smaller label; the root's moments and plane become the merged group's.
+#[allow(clippy::too_many_arguments)]
+fn merge_unsupported(
+    comp: &[u32],
+    edges: &EdgeMap,
+    w: usize,
+    h: usize,
+    parent: &mut [u32],
+    moments: &mut [Moments],
+    planes: &mut [Option<Plane>],
+    camera: &Camera,
+    params: &SegmentParams,
+) {
+    let ed = edges.as_slice();
+    // Within 1 px (8-neighbourhood) of an edge pixel.
+    let mut near = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if ed[y * w + x] {
+                for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                    for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                        near[yy * w + xx] = true;
+                    }
+                }
+            }
+        }
+    }
+    // (smaller label, larger label) → (border pixel count, supported count), over 4-adjacencies.
+    let mut pairs: BTreeMap<(u32, u32), (u32, u32)> = BTreeMap::new();
+    let mut add = |i: usize, j: usize| {
+        let (a, b) = (comp[i], comp[j]);
+        if a != 0 && b != 0 && a != b {
+            let entry = pairs.entry((a.min(b), a.max(b))).or_insert((0, 0));
+            entry.0 += 2;
+            entry.1 += u32::from(near[i]) + u32::from(near[j]);
+        }
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x + 1 < w {
+                add(i, i + 1);
+            }
+            if y + 1 < h {
+                add(i, i + w);
+            }
+        }
+    }
+    let candidates: Vec<(u32, u32)> = pairs
+        .iter()
+        .filter(|&(_, &(n, s))| f64::from(s) < params.min_border_support * f64::from(n))
+        .map(|(&k, _)| k)
+        .collect();
+    let cos_max = params.merge_max_angle_deg.to_radians().cos();
+    let r2 = params.merge_max_residual * params.merge_max_residual;
+    let mut merges = 0u32;
+    loop {
+        let mut changed = false;
+        for &(a, b) in &candidates {
+            let (ra, rb) = (find(parent, a), find(parent, b));
+            if ra == rb {
+                continue;
+            }
+            let (ia, ib) = (ra as usize - 1, rb as usize - 1);
+            let (pa, pb) = (planes[ia].expect("kept region"), planes[ib].expect("kept region"));
+            let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
+            if dot.abs() < cos_max
+                || moments[ia].mean_sq_residual(&pb) > r2
+                || moments[ib].mean_sq_residual(&pa) > r2
+            {
+                continue;
+            }
+            let (root, other) = (ra.min(rb), ra.max(rb));
+            parent[other as usize] = root;
+            let m = moments[other as usize - 1];
+            moments[root as usize - 1].merge(&m);
+            planes[root as usize - 1] = Some(fit_plane(&moments[root as usize - 1], camera));
+            changed = true;
+            merges += 1;
+        }
+        if !changed {
+            break;
+        }
+    }
+    tracing::debug!(pairs = pairs.len(), candidates = candidates.len(), merges, "merged");
 }
 
 #[cfg(test)]
@@ -304,9 +535,10 @@ mod tests {
             edges[(20, y)] = false;
         }
         let open = SegmentParams { gap_close_px: 0.0, ..SegmentParams::default() };
-        let (_, regions) = final_segmentation(&range, &Camera::Grid, &edges, &open);
+        let (_, regions) = final_segmentation(&range, &Camera::Grid, &edges, None, &open);
         assert_eq!(regions.len(), 1, "without gap closing the two faces leak into one component");
-        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, &SegmentParams::default());
+        let (labels, regions) =
+            final_segmentation(&range, &Camera::Grid, &edges, None, &SegmentParams::default());
         assert_eq!(regions.len(), 2);
         for y in 0..30 {
             assert_eq!(labels[(10, y)], 1);
@@ -319,7 +551,7 @@ mod tests {
     fn two_planes_split(gap_close_px: f64) {
         let (range, edges) = two_planes();
         let params = SegmentParams { gap_close_px, ..SegmentParams::default() };
-        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, &params);
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, None, &params);
         assert_eq!(regions.len(), 2);
         for (x, y, &l) in labels.enumerate() {
             let want = if range[(x, y)].is_nan() {
@@ -363,7 +595,8 @@ mod tests {
             &range,
             &Camera::Grid,
             &edges,
-            &SegmentParams { min_region_px: 10, gap_close_px: 0.0 },
+            None,
+            &SegmentParams { min_region_px: 10, gap_close_px: 0.0, ..SegmentParams::default() },
         );
         assert_eq!(regions.len(), 2);
         for (x, y, &l) in labels.enumerate() {
@@ -376,14 +609,19 @@ mod tests {
     fn isolated_and_invalid_pixels_stay_unlabelled() {
         // Everything is edge: no region at all.
         let range = Grid::new(10, 10, 50.0f32);
-        let (labels, regions) =
-            final_segmentation(&range, &Camera::ABW0, &Grid::new(10, 10, true), &SegmentParams::default());
+        let (labels, regions) = final_segmentation(
+            &range,
+            &Camera::ABW0,
+            &Grid::new(10, 10, true),
+            None,
+            &SegmentParams::default(),
+        );
         assert!(regions.is_empty());
         assert!(labels.as_slice().iter().all(|&l| l == 0));
         // An all-NaN image.
         let nan = Grid::new(6, 5, f32::NAN);
         let (labels, regions) =
-            final_segmentation(&nan, &Camera::ABW0, &Grid::new(6, 5, false), &SegmentParams::default());
+            final_segmentation(&nan, &Camera::ABW0, &Grid::new(6, 5, false), None, &SegmentParams::default());
         assert!(regions.is_empty() && labels.as_slice().iter().all(|&l| l == 0));
     }
 
@@ -396,7 +634,8 @@ mod tests {
             &range,
             &Camera::ABW0,
             &edges,
-            &SegmentParams { min_region_px: 5, gap_close_px: 0.0 },
+            None,
+            &SegmentParams { min_region_px: 5, gap_close_px: 0.0, ..SegmentParams::default() },
         );
         assert_eq!(regions.iter().map(|r| r.label).collect::<Vec<_>>(), vec![1, 2, 3]);
         let mut first = Vec::new();
@@ -411,5 +650,100 @@ mod tests {
         assert_ne!(labels[(12, 10)], labels[(25, 10)]);
         // ABW normals point toward the scanner (+z).
         assert!(regions.iter().all(|r| r.normal[2] > 0.0));
+    }
+
+    /// Region-growing labels: 1 for x < 20, 2 for x ≥ 20 (0 on NaN pixels).
+    fn rg_split(range: &RangeImage) -> LabelImage {
+        Grid::from_fn(range.width(), range.height(), |x, y| {
+            if range[(x, y)].is_nan() {
+                0
+            } else if x < 20 {
+                1
+            } else {
+                2
+            }
+        })
+    }
+
+    fn regions_mode() -> SegmentParams {
+        SegmentParams { mode: SegmentMode::Regions, ..SegmentParams::default() }
+    }
+
+    #[test]
+    fn regions_mode_splits_a_region_along_an_edge_line_inside_it() {
+        // Region growing merged both planes into one region; C separates them.
+        let (range, edges) = two_planes();
+        let rg = range.map(|v| u32::from(v.is_finite()));
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+        assert_eq!(labels[(5, 20)], 1);
+        assert_eq!(labels[(35, 20)], 2);
+        assert_eq!(labels[(0, 0)], 0, "NaN stays unlabelled");
+    }
+
+    #[test]
+    fn regions_mode_never_leaks_across_a_region_growing_border_of_different_planes() {
+        // No edges at all: Components mode gives one region, Regions mode keeps the two
+        // region-growing regions (the border is unsupported, but the planes differ).
+        let (range, _) = two_planes();
+        let none = Grid::new(40, 30, false);
+        let rg = rg_split(&range);
+        let comps = SegmentParams { mode: SegmentMode::Components, ..SegmentParams::default() };
+        assert_eq!(final_segmentation(&range, &Camera::Grid, &none, Some(&rg), &comps).1.len(), 1);
+        // Without region-growing labels, Regions mode falls back to Components.
+        assert_eq!(final_segmentation(&range, &Camera::Grid, &none, None, &regions_mode()).1.len(), 1);
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+        for (x, y, &l) in labels.enumerate() {
+            let want = if range[(x, y)].is_nan() { 0 } else { rg[(x, y)] };
+            assert_eq!(l, want, "pixel ({x}, {y})");
+        }
+    }
+
+    #[test]
+    fn regions_mode_merges_coplanar_regions_over_an_unsupported_border_only() {
+        // One plane, split in two by region growing.
+        let range = Grid::from_fn(40, 30, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32);
+        let rg = rg_split(&range);
+        let none = Grid::new(40, 30, false);
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 1, "unsupported border, same plane: merged");
+        assert_eq!(regions[0].size_px, 40 * 30);
+        assert!(labels.as_slice().iter().all(|&l| l == 1));
+        assert!(regions[0].rms_residual < 1e-3);
+        // The same border with edge support stays.
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2, "supported border: kept");
+        assert_ne!(labels[(5, 5)], labels[(35, 5)]);
+        // An edge along a tenth of the border (support ≈ 0.15 < min_border_support = 0.3): merged.
+        let partial = Grid::from_fn(40, 30, |x, y| (x == 19 || x == 20) && y < 3);
+        let (_, regions) = final_segmentation(&range, &Camera::Grid, &partial, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 1);
+        // A tilt of 1.0 vs 0.5 per pixel (about 18° apart in Grid units) is not merged.
+        let tilted =
+            Grid::from_fn(
+                40,
+                30,
+                |x, _| if x < 20 { 100.0 + 0.5 * x as f32 } else { 110.0 + (x as f32 - 20.0) },
+            );
+        let (_, regions) = final_segmentation(&tilted, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+    }
+
+    #[test]
+    fn segment_params_default_validates_and_round_trips() {
+        let p = SegmentParams::default();
+        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.mode, SegmentMode::Regions);
+        let json = serde_json::to_string(&p).unwrap();
+        assert!(json.contains(r#""mode":"regions""#), "{json}");
+        let back: SegmentParams = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, p);
+        let c: SegmentParams = serde_json::from_str(r#"{"mode": "components"}"#).unwrap();
+        assert_eq!(c.mode, SegmentMode::Components);
+        assert!(SegmentParams { min_border_support: 1.5, ..p.clone() }.validate().is_err());
+        assert!(SegmentParams { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
+        assert!(SegmentParams { merge_max_residual: f64::NAN, ..p }.validate().is_err());
     }
 }
