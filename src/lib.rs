@@ -1,5 +1,13 @@
-//! rangeseg: range image segmentation by cooperative relaxation (Belloum et al., 2024).
-//!
+#![doc = include_str!("../README.md")]
+
 //! The facade crate: it re-exports the pipeline stages and holds the configuration that ties them.
 
+pub mod config;
+pub mod evaluate;
+pub mod output;
+pub mod pipeline;
+
+pub use config::{C1Strength, Config, ConfigError, PipelineParams};
+pub use output::write_outputs;
+pub use pipeline::{Output, segment};
 pub use {eval, features, rangeimage, rangeio, regiongrow, relax, vcanny};

@@ -1,5 +1,6 @@
 //! Subcommands of the `rangeseg` tool, one module each.
 
+mod config;
 mod edges;
 mod info;
 mod regions;
@@ -32,6 +33,8 @@ enum Command {
     Regions(regions::Args),
     /// Run the whole pipeline: regions, edges, relaxation, final segmentation.
     Segment(segment::Args),
+    /// Print a complete configuration (the defaults, or the paper's with --paper) as TOML.
+    Config(config::Args),
 }
 
 /// Runs the parsed command line.
@@ -43,5 +46,6 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Edges(a) => edges::run(a),
         Command::Regions(a) => regions::run(a),
         Command::Segment(a) => segment::run(a),
+        Command::Config(a) => config::run(a),
     }
 }

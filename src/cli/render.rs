@@ -14,6 +14,9 @@ pub(crate) struct Args {
     /// Output PNG: valid range (0.5–99.5th percentile) as gray 1..255, near = bright, no data black.
     #[arg(short, long, value_name = "OUT.png")]
     output: PathBuf,
+    /// Write a Lambertian shading of the surface (light from the upper left) instead of the depth.
+    #[arg(long)]
+    shade: bool,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -21,7 +24,11 @@ pub(crate) struct Args {
 /// Runs `rangeseg render`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let frame = rangeio::read(&args.file, &args.read.options())?;
-    rangeio::png::write_depth_png(&args.output, &frame.range)?;
+    if args.shade {
+        rangeio::png::write_gray_png(&args.output, &features::shade(&frame.range))?;
+    } else {
+        rangeio::png::write_depth_png(&args.output, &frame.range)?;
+    }
     let (w, h) = frame.range.dimensions();
     writeln!(
         std::io::stdout().lock(),

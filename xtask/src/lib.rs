@@ -1,7 +1,11 @@
 //! Project automation behind `cargo xtask` (gen-data, tune, eval, tidy), as a library so that
 //! subcommands and tests can share helpers such as [`gen_data::ensure_synthetic_data`].
 
+pub mod eval;
 pub mod gen_data;
+mod report;
+pub mod tidy;
+pub mod tune;
 
 use std::path::{Path, PathBuf};
 
@@ -9,10 +13,18 @@ use std::path::{Path, PathBuf};
 pub const USAGE: &str = "usage: cargo xtask <command>
 
 commands:
+  eval [--config C.toml] [--data DIR] [--out DIR]
+      Run the test split (the synthetic benchmark by default, generated on first use; real ABW files
+      with --data) and write target/eval/report.{md,html}, results.{csv,json} and figures
+  tune [--grid configs/tune.toml] [--objective NAME] [--write]
+      Sweep the grid over the training split only; write target/tune/{results.csv,best.toml,report.md};
+      --write also updates configs/default.toml
   gen-data [--out DIR] [--check] [--figures]
       Generate the synthetic ABW-like benchmark (10 train + 30 test) into data/synthetic-abw/
       and its MANIFEST.sha256; --check regenerates and compares with the committed manifest;
-      --figures also renders docs/img/synthetic-example-{range,gt}.png";
+      --figures also renders docs/img/synthetic-example-{range,gt}.png
+  tidy
+      Check the source tree: `//!` doc lines, workspace lints, stage crate dependencies";
 
 /// The workspace root (the parent of xtask/).
 pub fn project_root() -> PathBuf {

@@ -1,0 +1,102 @@
+//! Scoring one image of a benchmark: the numbers behind Tables I and II and the Hoover table.
+
+use crate::pipeline::Output;
+use eval::boundary::Prf;
+use eval::hoover::HooverScore;
+use rangeimage::{EdgeMap, LabelImage, Region};
+use serde::Serialize;
+
+/// Edge tolerance of the boundary and paper-precision metrics, in pixels.
+pub const TOLERANCE_PX: f64 = 2.0;
+/// Hoover tolerance of the main table.
+pub const HOOVER_T: f64 = 0.8;
+/// Hoover tolerances of the correct-detection curve.
+pub fn hoover_curve_ts() -> Vec<f64> {
+    (0..=22).map(|i| 0.51 + 0.02 * f64::from(i)).collect()
+}
+
+/// Scores of one edge map.
+#[derive(Debug, Clone, Serialize)]
+pub struct EdgeScores {
+    /// Edge pixels detected.
+    pub n_edges: usize,
+    /// Paper precision (Eq. 7) against the initial region borders C1.
+    pub paper_precision_c1: Option<f64>,
+    /// Paper precision against the ground-truth boundaries.
+    pub paper_precision_gt: Option<f64>,
+    /// Boundary P/R/F against ground truth, one-to-one matching.
+    pub matched: Prf,
+    /// Boundary P/R/F against ground truth, simple distance rule.
+    pub simple: Prf,
+}
+
+/// Every number the evaluation reports for one image.
+#[derive(Debug, Clone, Serialize)]
+pub struct ImageScores {
+    /// Table I: Canny on raw depth.
+    pub raw_canny: EdgeScores,
+    /// Table I and II: Canny on plane parameters, C2 before relaxation.
+    pub c2: EdgeScores,
+    /// Region borders C1 before relaxation.
+    pub c1: EdgeScores,
+    /// Table II: the final edge map after relaxation.
+    pub relaxed: EdgeScores,
+    /// Hoover at T = 0.8 for region growing alone.
+    pub hoover_regiongrow: HooverScore,
+    /// Hoover at T = 0.8 for the final segmentation.
+    pub hoover_final: HooverScore,
+    /// Correct detections of the final segmentation over `hoover_curve_ts()`.
+    pub curve_correct: Vec<u32>,
+    /// Correct detections of region growing alone over `hoover_curve_ts()`.
+    pub curve_correct_regiongrow: Vec<u32>,
+}
+
+/// Scores an edge map against C1 and the ground truth.
+pub fn score_edges(edges: &EdgeMap, c1: &EdgeMap, gt: &LabelImage) -> EdgeScores {
+    let gt_edges = eval::boundary::gt_boundaries(gt);
+    EdgeScores {
+        n_edges: edges.as_slice().iter().filter(|&&b| b).count(),
+        paper_precision_c1: eval::paper_precision(edges, c1, TOLERANCE_PX),
+        paper_precision_gt: eval::paper_precision(edges, &gt_edges, TOLERANCE_PX),
+        matched: eval::boundary::matched(edges, gt, TOLERANCE_PX),
+        simple: eval::boundary::simple(edges, gt, TOLERANCE_PX),
+    }
+}
+
+/// Region normals as `(label, normal)` pairs for the Hoover angle error.
+pub fn normals_of(regions: &[Region]) -> Vec<(u32, [f32; 3])> {
+    regions.iter().map(|r| (r.label, r.normal)).collect()
+}
+
+/// Scores the pipeline's output for one image against its ground truth.
+pub fn score_image(
+    out: &Output,
+    raw_canny: &EdgeMap,
+    gt: &LabelImage,
+    gt_angles: &[(u32, u32, f64)],
+) -> ImageScores {
+    let _s = tracing::info_span!("score_image").entered();
+    let c1 = &out.regions.c1;
+    let ts = hoover_curve_ts();
+    let correct = |labels| eval::hoover::curve(gt, labels, &ts).iter().map(|s| s.correct).collect();
+    ImageScores {
+        raw_canny: score_edges(raw_canny, c1, gt),
+        c2: score_edges(&out.canny.edges, c1, gt),
+        c1: score_edges(c1, c1, gt),
+        relaxed: score_edges(out.fin.edges(), c1, gt),
+        hoover_regiongrow: hoover(gt, &out.regions.labels, &out.regions.regions, gt_angles),
+        hoover_final: hoover(gt, &out.fin.labels, &out.fin.final_regions, gt_angles),
+        curve_correct: correct(&out.fin.labels),
+        curve_correct_regiongrow: correct(&out.regions.labels),
+    }
+}
+
+/// Hoover metrics at T = 0.8 of a segmentation with its region normals.
+pub fn hoover(
+    gt: &LabelImage,
+    labels: &LabelImage,
+    regions: &[Region],
+    gt_angles: &[(u32, u32, f64)],
+) -> HooverScore {
+    eval::hoover::compare(gt, labels, HOOVER_T, Some(gt_angles), Some(&normals_of(regions)))
+}

@@ -1,0 +1,53 @@
+//! Writing one image's pipeline results to disk in the ABW formats and as PNGs.
+
+use crate::pipeline::Output;
+use rangeio::Frame;
+use std::path::Path;
+
+/// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png` and `STEM.regions.png`
+/// into `dir`, each atomically, and returns a JSON summary (counts, energies) for `STEM.json`.
+pub fn write_outputs(
+    dir: &Path,
+    stem: &str,
+    frame: &Frame,
+    out: &Output,
+) -> Result<serde_json::Value, rangeio::WriteError> {
+    let _s = tracing::info_span!("write_outputs", stem).entered();
+    let path = |ext: &str| dir.join(format!("{stem}.{ext}"));
+    let mapping = rangeio::abw::write_labels(&path("ms-seg"), &out.fin.labels)?;
+    let normals: Vec<(u32, [f32; 3])> = mapping
+        .iter()
+        .filter_map(|&(old, new)| {
+            out.fin.final_regions.iter().find(|r| r.label == old).map(|r| (u32::from(new), r.normal))
+        })
+        .collect();
+    rangeio::abw::write_normals(&path("ms-nor"), &normals)?;
+    rangeio::png::write_edge_png(&path("edges.png"), out.fin.edges())?;
+    rangeio::png::write_edge_png(&path("c1.png"), &out.regions.c1)?;
+    rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;
+    rangeio::png::write_label_png(&path("regions.png"), &out.fin.labels)?;
+
+    let count = |e: &rangeimage::EdgeMap| e.as_slice().iter().filter(|&&b| b).count();
+    let info = &out.fin.relax_info;
+    Ok(serde_json::json!({
+        "format": frame.format.to_string(),
+        "width": frame.range.width(),
+        "height": frame.range.height(),
+        "regions_grown": out.regions.regions.len(),
+        "regions_final": out.fin.final_regions.len(),
+        "regions_written": mapping.len(),
+        "c1_px_initial": count(&out.regions.c1),
+        "c2_px_initial": count(&out.canny.edges),
+        "c1_px": count(&out.fin.relaxed.c1),
+        "c2_px": count(&out.fin.relaxed.c2),
+        "edge_px": count(out.fin.edges()),
+        "relax": {
+            "removed_c1": info.removed_c1,
+            "removed_c2": info.removed_c2,
+            "energy_before": info.energy_before,
+            "energy_after": info.energy_after,
+            "sweeps": info.sweeps,
+            "acceptance_rate": info.acceptance_rate,
+        },
+    }))
+}

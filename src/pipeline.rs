@@ -1,0 +1,118 @@
+//! The whole method on one in-memory range image: features → regions (C1) and Canny (C2) → relaxation → labels.
+
+use crate::config::{C1Strength, Config};
+use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
+use serde::Serialize;
+use std::time::Instant;
+
+/// Wall-clock time spent in each stage, in milliseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StageTimings {
+    /// Local planes, derivatives and curvatures.
+    pub features: f64,
+    /// Region growing and C1.
+    pub regiongrow: f64,
+    /// Canny on plane parameters (C2).
+    pub vcanny: f64,
+    /// Pruning, annealing and the final segmentation.
+    pub relax: f64,
+}
+
+/// Everything the pipeline computed for one image.
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// Per-pixel geometry.
+    pub features: SurfaceFeatures,
+    /// Region-growing segmentation and its borders C1.
+    pub regions: regiongrow::Segmentation,
+    /// Region-growing diagnostics.
+    pub regions_info: regiongrow::Info,
+    /// Canny edges C2 and the gradient magnitude.
+    pub canny: vcanny::Edges,
+    /// Relaxation and final segmentation.
+    pub fin: Finish,
+    /// Time per stage.
+    pub timings: StageTimings,
+}
+
+/// What the last stage produces: relaxed edges and the final segmentation.
+#[derive(Debug, Clone)]
+pub struct Finish {
+    /// C1 and C2 after relaxation, and the final edge map C = C1 ∪ C2.
+    pub relaxed: relax::Relaxed,
+    /// Relaxation diagnostics (energies, acceptance).
+    pub relax_info: relax::Info,
+    /// The final segmentation (0 = none, regions 1..).
+    pub labels: LabelImage,
+    /// Geometry of each final region.
+    pub final_regions: Vec<Region>,
+}
+
+impl Finish {
+    /// The final edge map C.
+    pub fn edges(&self) -> &EdgeMap {
+        &self.relaxed.edges
+    }
+}
+
+fn elapsed_ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Runs the whole method on one range image.
+pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
+    let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
+    let t = Instant::now();
+    let features = features::compute(range, &config.features);
+    let t_features = elapsed_ms(t);
+
+    let t = Instant::now();
+    let (regions, regions_info) = regiongrow::grow(range, &features, camera, &config.regiongrow, config.seed);
+    let t_regions = elapsed_ms(t);
+
+    let t = Instant::now();
+    let valid = rangeimage::valid_mask(range);
+    let canny = vcanny::detect_planes(&features.plane, &valid, &config.vcanny);
+    let t_canny = elapsed_ms(t);
+
+    let t = Instant::now();
+    let fin = finish(range, camera, config, &features, &regions, &canny);
+    let t_relax = elapsed_ms(t);
+
+    let timings =
+        StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
+    Output { features, regions, regions_info, canny, fin, timings }
+}
+
+/// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
+pub fn finish(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &Config,
+    features: &SurfaceFeatures,
+    regions: &regiongrow::Segmentation,
+    canny: &vcanny::Edges,
+) -> Finish {
+    let valid = rangeimage::valid_mask(range);
+    let s1 = c1_strength(features, config.pipeline.c1_strength);
+    let (relaxed, relax_info) = if config.pipeline.relax {
+        relax::relax(&regions.c1, &s1, &canny.edges, &canny.magnitude, &valid, &config.relax, config.seed)
+    } else {
+        let edges =
+            Grid::from_fn(range.width(), range.height(), |x, y| regions.c1[(x, y)] || canny.edges[(x, y)]);
+        let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
+        (relaxed, relax::Info::default())
+    };
+    let (labels, final_regions) =
+        relax::final_segmentation(range, camera, &relaxed.edges, Some(&regions.labels), &config.segment);
+    Finish { relaxed, relax_info, labels, final_regions }
+}
+
+/// The C1 strength map s1 for the relaxation energy; 0 where undefined.
+pub fn c1_strength(features: &SurfaceFeatures, which: C1Strength) -> Grid<f32> {
+    let src = match which {
+        C1Strength::AbsK => features.k.map(|k| k.abs()),
+        C1Strength::Curvedness => features.curvedness.clone(),
+    };
+    src.map(|v| if v.is_finite() { *v } else { 0.0 })
+}

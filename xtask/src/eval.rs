@@ -1,0 +1,126 @@
+//! `cargo xtask eval`: the paper's protocol on the test split, and a report people read.
+
+use crate::report::{self, ImageRow, Report};
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use rangeio::abw::{AbwImage, Dataset};
+use rangeseg::Config;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of `cargo xtask eval`.
+struct Options {
+    config: PathBuf,
+    data: Option<PathBuf>,
+    out: PathBuf,
+}
+
+fn parse(root: &Path, args: &[String]) -> Result<Options> {
+    let mut o =
+        Options { config: root.join("configs/default.toml"), data: None, out: root.join("target/eval") };
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = || it.next().cloned().with_context(|| format!("{a} needs a value"));
+        match a.as_str() {
+            "--config" => o.config = value()?.into(),
+            "--data" => o.data = Some(value()?.into()),
+            "--out" => o.out = value()?.into(),
+            other => bail!(
+                "unknown option {other}\nusage: cargo xtask eval [--config C.toml] [--data DIR] [--out DIR]"
+            ),
+        }
+    }
+    Ok(o)
+}
+
+/// Runs `cargo xtask eval`.
+pub fn run(root: &Path, args: &[String]) -> Result<()> {
+    let started = Instant::now();
+    let o = parse(root, args)?;
+    let config = Config::load(&o.config)?;
+    let data = match &o.data {
+        Some(d) => d.clone(),
+        None => crate::gen_data::ensure_synthetic_data(root)?,
+    };
+    let dataset = Dataset::discover(&data)?;
+    if dataset.test.is_empty() {
+        bail!("{}: no test images (abw.test.N.range)", data.display());
+    }
+    let out_dir = o.out.join("out");
+    let fig_dir = o.out.join("figures");
+    for d in [&out_dir, &fig_dir] {
+        std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create", d.display()))?;
+    }
+    eprintln!(
+        "evaluating {} test images from {} with {}",
+        dataset.test.len(),
+        data.display(),
+        o.config.display()
+    );
+    let bar = ProgressBar::new(dataset.test.len() as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} [{elapsed_precise} < {eta_precise}]")
+            .expect("template"),
+    );
+    let rows: Vec<ImageRow> = dataset
+        .test
+        .par_iter()
+        .map(|img| {
+            let r = evaluate_one(img, &config, &out_dir, &fig_dir);
+            bar.inc(1);
+            r
+        })
+        .collect::<Result<_>>()?;
+    bar.finish_and_clear();
+
+    let report = Report {
+        data_dir: data.display().to_string(),
+        config_path: o.config.display().to_string(),
+        config_toml: config.to_toml(),
+        rows,
+        wall_s: started.elapsed().as_secs_f64(),
+        threads: rayon::current_num_threads(),
+    };
+    report::write_all(&report, &o.out)?;
+    eprintln!("{}", report::summary(&report));
+    eprintln!("wrote {}", o.out.join("report.html").display());
+    Ok(())
+}
+
+/// Runs the pipeline on one test image, writes its outputs and figure, and scores it.
+fn evaluate_one(img: &AbwImage, config: &Config, out_dir: &Path, fig_dir: &Path) -> Result<ImageRow> {
+    let t = Instant::now();
+    let frame =
+        rangeio::read(&img.range, &rangeio::ReadOptions { camera: Some(img.camera), ..Default::default() })?;
+    let gt_path = img.gt_seg.as_ref().with_context(|| format!("{}: no ground truth (.gt-seg)", img.stem))?;
+    let gt = rangeio::abw::read_labels(gt_path, true)?;
+    let angles: Vec<(u32, u32, f64)> = match &img.gt_ang {
+        Some(p) => rangeio::abw::read_angles(p)?.iter().map(|a| (a.a, a.b, a.angle_deg)).collect(),
+        None => Vec::new(),
+    };
+    let read_ms = t.elapsed().as_secs_f64() * 1e3;
+
+    let t_total = Instant::now();
+    let out = rangeseg::segment(&frame.range, &frame.camera, config);
+    let raw = vcanny::detect_raw(&frame.range, &config.raw_canny);
+    let t = Instant::now();
+    rangeseg::write_outputs(out_dir, &img.stem, &frame, &out)?;
+    let write_ms = t.elapsed().as_secs_f64() * 1e3;
+    let total_ms = t_total.elapsed().as_secs_f64() * 1e3 + read_ms;
+
+    let scores = rangeseg::evaluate::score_image(&out, &raw.edges, &gt, &angles);
+    let figure = report::figure(&frame.range, &gt, &out);
+    let fig_path = fig_dir.join(format!("{}.png", img.stem));
+    rangeio::png::write_rgb_png(&fig_path, &figure)?;
+    Ok(ImageRow {
+        stem: img.stem.clone(),
+        scores,
+        timings: out.timings,
+        read_ms,
+        write_ms,
+        total_ms,
+        relax_energy_before: out.fin.relax_info.energy_before,
+        relax_energy_after: out.fin.relax_info.energy_after,
+        figure: fig_path,
+    })
+}

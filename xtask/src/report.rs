@@ -1,0 +1,477 @@
+//! The evaluation report: Markdown, self-contained HTML, CSV and JSON from the per-image results.
+
+use anyhow::{Context, Result};
+use base64::Engine as _;
+use rangeimage::{EdgeMap, Grid, LabelImage, RangeImage};
+use rangeseg::evaluate::{EdgeScores, ImageScores, hoover_curve_ts};
+use rangeseg::pipeline::{Output, StageTimings};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Published Hoover et al. (1996) correct detections on the real ABW test set, T = 0.8, of 15.2 GT regions.
+const PUBLISHED_HOOVER: &[(&str, f64)] = &[("UE", 13.4), ("UB", 12.8), ("USF", 12.7), ("WSU", 9.7)];
+/// The paper's Table I means (precision against C1, real ABW).
+const PAPER_TABLE1: (&str, &str) = ("0.6236 ± 0.1050", "0.9422 ± 0.0209");
+
+/// One test image's results.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct ImageRow {
+    pub(crate) stem: String,
+    pub(crate) scores: ImageScores,
+    pub(crate) timings: StageTimings,
+    pub(crate) read_ms: f64,
+    pub(crate) write_ms: f64,
+    pub(crate) total_ms: f64,
+    pub(crate) relax_energy_before: f64,
+    pub(crate) relax_energy_after: f64,
+    #[serde(skip)]
+    pub(crate) figure: PathBuf,
+}
+
+/// Everything the report shows.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct Report {
+    pub(crate) data_dir: String,
+    pub(crate) config_path: String,
+    pub(crate) config_toml: String,
+    pub(crate) rows: Vec<ImageRow>,
+    pub(crate) wall_s: f64,
+    pub(crate) threads: usize,
+}
+
+/// Mean and sample standard deviation, in input order (deterministic).
+pub(crate) fn mean_std(xs: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = xs.into_iter().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 { v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+    (mean, var.sqrt())
+}
+
+fn ms(xs: impl IntoIterator<Item = f64>, digits: usize) -> String {
+    let (m, s) = mean_std(xs);
+    if m.is_nan() { "—".into() } else { format!("{m:.digits$} ± {s:.digits$}") }
+}
+
+fn opt(x: Option<f64>) -> f64 {
+    x.unwrap_or(f64::NAN)
+}
+
+/// A Markdown table from a header and rows.
+fn md_table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut s = format!("| {} |\n|{}\n", header.join(" | "), "---|".repeat(header.len()));
+    for r in rows {
+        let _ = writeln!(s, "| {} |", r.join(" | "));
+    }
+    s
+}
+
+/// An HTML table from a header and rows.
+fn html_table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut s = String::from("<table><thead><tr>");
+    for h in header {
+        let _ = write!(s, "<th>{}</th>", esc(h));
+    }
+    s.push_str("</tr></thead><tbody>");
+    for r in rows {
+        s.push_str("<tr>");
+        for c in r {
+            let _ = write!(s, "<td>{}</td>", esc(c));
+        }
+        s.push_str("</tr>");
+    }
+    s.push_str("</tbody></table>\n");
+    s
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// The report's tables as (title, note, header, rows).
+type Table = (&'static str, String, Vec<&'static str>, Vec<Vec<String>>);
+
+fn tables(r: &Report) -> Vec<Table> {
+    let rows = &r.rows;
+    let edge_row = |name: &str, pick: &dyn Fn(&ImageScores) -> &EdgeScores| -> Vec<String> {
+        let e = |f: &dyn Fn(&EdgeScores) -> f64| ms(rows.iter().map(|x| f(pick(&x.scores))), 4);
+        vec![
+            name.to_string(),
+            e(&|s| opt(s.paper_precision_c1)),
+            e(&|s| opt(s.paper_precision_gt)),
+            e(&|s| s.matched.precision),
+            e(&|s| s.matched.recall),
+            e(&|s| s.matched.f),
+            e(&|s| s.simple.f),
+            ms(rows.iter().map(|x| pick(&x.scores).n_edges as f64), 0),
+        ]
+    };
+    let edge_header = vec![
+        "edge map",
+        "paper precision vs C1",
+        "paper precision vs GT",
+        "P (1:1)",
+        "R (1:1)",
+        "F (1:1)",
+        "F (simple)",
+        "edge px",
+    ];
+    let table1 = vec![
+        edge_row("Canny on raw depth", &|s| &s.raw_canny),
+        edge_row("Canny on plane parameters (C2)", &|s| &s.c2),
+        vec![
+            "paper, real ABW (raw / plane), precision vs C1".into(),
+            format!("{} / {}", PAPER_TABLE1.0, PAPER_TABLE1.1),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+        ],
+    ];
+    let mut table2: Vec<Vec<String>> = rows
+        .iter()
+        .map(|x| {
+            let s = &x.scores;
+            let (a, b) = (opt(s.c2.paper_precision_c1), opt(s.relaxed.paper_precision_c1));
+            vec![
+                x.stem.clone(),
+                format!("{a:.4}"),
+                format!("{b:.4}"),
+                format!("{:+.2}%", 100.0 * (b - a)),
+                format!("{:.4}", s.c2.matched.f),
+                format!("{:.4}", s.relaxed.matched.f),
+                format!("{:+.4}", s.relaxed.matched.f - s.c2.matched.f),
+            ]
+        })
+        .collect();
+    let d = |f: &dyn Fn(&ImageScores) -> f64| ms(rows.iter().map(|x| f(&x.scores)), 4);
+    table2.push(vec![
+        "mean ± std".into(),
+        d(&|s| opt(s.c2.paper_precision_c1)),
+        d(&|s| opt(s.relaxed.paper_precision_c1)),
+        format!(
+            "{:+.2}%",
+            100.0
+                * mean_std(rows.iter().map(|x| {
+                    opt(x.scores.relaxed.paper_precision_c1) - opt(x.scores.c2.paper_precision_c1)
+                }))
+                .0
+        ),
+        d(&|s| s.c2.matched.f),
+        d(&|s| s.relaxed.matched.f),
+        format!(
+            "{:+.4}",
+            mean_std(rows.iter().map(|x| x.scores.relaxed.matched.f - x.scores.c2.matched.f)).0
+        ),
+    ]);
+    let hoover_row = |name: &str, pick: &dyn Fn(&ImageScores) -> &eval::hoover::HooverScore| -> Vec<String> {
+        let h =
+            |f: &dyn Fn(&eval::hoover::HooverScore) -> f64| ms(rows.iter().map(|x| f(pick(&x.scores))), 2);
+        vec![
+            name.into(),
+            h(&|s| f64::from(s.gt_regions)),
+            h(&|s| f64::from(s.correct)),
+            h(&|s| opt(s.angle_error_deg)),
+            h(&|s| f64::from(s.over)),
+            h(&|s| f64::from(s.under)),
+            h(&|s| f64::from(s.missed)),
+            h(&|s| f64::from(s.noise)),
+        ]
+    };
+    let mut hoover = vec![
+        hoover_row("region growing alone (ours)", &|s| &s.hoover_regiongrow),
+        hoover_row("final segmentation (ours)", &|s| &s.hoover_final),
+    ];
+    for (name, correct) in PUBLISHED_HOOVER {
+        hoover.push(vec![
+            format!("{name} — Hoover et al. 1996, real ABW (other data)"),
+            "15.2".into(),
+            format!("{correct:.1}"),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+            "—".into(),
+        ]);
+    }
+    let t = |f: &dyn Fn(&ImageRow) -> f64| ms(rows.iter().map(f), 1);
+    let timings = vec![vec![
+        t(&|x| x.read_ms),
+        t(&|x| x.timings.features),
+        t(&|x| x.timings.regiongrow),
+        t(&|x| x.timings.vcanny),
+        t(&|x| x.timings.relax),
+        t(&|x| x.write_ms),
+        t(&|x| x.total_ms),
+    ]];
+    vec![
+        (
+            "Table I: Canny on raw depth vs on plane parameters",
+            format!(
+                "Thresholds tuned on the training split only. Tolerance {} px. Paper precision (Eq. 7) against C1 is the paper's protocol; against ground truth and the boundary P/R/F are the honest versions. The paper's row is measured on the real ABW images, not on this data.",
+                rangeseg::evaluate::TOLERANCE_PX
+            ),
+            edge_header,
+            table1,
+        ),
+        (
+            "Table II: before (C2) vs after relaxation (final C), per image",
+            "Paper precision against the initial C1 (the paper's protocol; it reports +3.20% on average on real ABW) and one-to-one boundary F against ground truth.".into(),
+            vec!["image", "precision C2", "precision relaxed", "Δ precision", "F C2", "F relaxed", "Δ F"],
+            table2,
+        ),
+        (
+            "Hoover et al. region metrics at T = 0.8 (mean ± std per image)",
+            "Rows marked 'other data' are Hoover et al.'s published figures on the real ABW test set, for scale only.".into(),
+            vec!["segmenter", "GT regions", "correct", "angle error (°)", "over", "under", "missed", "noise"],
+            hoover,
+        ),
+        (
+            "Per-stage timings (ms per image, mean ± std)",
+            format!("{} images on {} threads; whole evaluation {:.1} s wall time.", rows.len(), r.threads, r.wall_s),
+            vec!["read", "features", "regiongrow", "vcanny", "relax + final", "write", "total"],
+            timings,
+        ),
+    ]
+}
+
+/// Mean correct detections over T for both segmentations.
+fn curve(r: &Report) -> Vec<(f64, f64, f64)> {
+    hoover_curve_ts()
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| {
+            let m = |pick: &dyn Fn(&ImageScores) -> &Vec<u32>| {
+                mean_std(r.rows.iter().map(|x| f64::from(pick(&x.scores)[i]))).0
+            };
+            (t, m(&|s| &s.curve_correct_regiongrow), m(&|s| &s.curve_correct))
+        })
+        .collect()
+}
+
+/// An SVG line plot of mean correct detections against the Hoover tolerance T.
+fn curve_svg(points: &[(f64, f64, f64)], gt_mean: f64) -> String {
+    let (w, h, pad) = (560.0, 320.0, 48.0);
+    let ymax = (gt_mean.max(1.0) * 1.1).ceil();
+    let px = |t: f64| pad + (t - 0.5) / 0.45 * (w - 2.0 * pad);
+    let py = |c: f64| h - pad - c / ymax * (h - 2.0 * pad);
+    let line = |sel: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        points.iter().map(|p| format!("{:.1},{:.1}", px(p.0), py(sel(p)))).collect::<Vec<_>>().join(" ")
+    };
+    let mut s = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = write!(
+        s,
+        r#"<line x1="{pad}" y1="{b}" x2="{r}" y2="{b}" stroke="black"/><line x1="{pad}" y1="{pad}" x2="{pad}" y2="{b}" stroke="black"/>"#,
+        b = h - pad,
+        r = w - pad
+    );
+    for i in 0..=9 {
+        let t = 0.5 + 0.05 * f64::from(i);
+        let _ =
+            write!(s, r#"<text x="{:.1}" y="{}" text-anchor="middle">{t:.2}</text>"#, px(t), h - pad + 16.0);
+    }
+    for i in 0..=4 {
+        let c = ymax * f64::from(i) / 4.0;
+        let _ =
+            write!(s, r#"<text x="{}" y="{:.1}" text-anchor="end">{c:.0}</text>"#, pad - 6.0, py(c) + 4.0);
+    }
+    let _ = write!(
+        s,
+        r#"<line x1="{pad}" y1="{y:.1}" x2="{r}" y2="{y:.1}" stroke="gray" stroke-dasharray="4 3"/><text x="{r}" y="{ty:.1}" text-anchor="end" fill="gray">GT regions {gt_mean:.1}</text>"#,
+        y = py(gt_mean),
+        ty = py(gt_mean) - 4.0,
+        r = w - pad
+    );
+    let _ = write!(
+        s,
+        r##"<polyline fill="none" stroke="#1f77b4" stroke-width="2" points="{}"/>"##,
+        line(&|p| p.2)
+    );
+    let _ = write!(
+        s,
+        r##"<polyline fill="none" stroke="#ff7f0e" stroke-width="2" stroke-dasharray="5 3" points="{}"/>"##,
+        line(&|p| p.1)
+    );
+    let _ = write!(
+        s,
+        r##"<text x="{x}" y="{y1}" fill="#1f77b4">final segmentation</text><text x="{x}" y="{y2}" fill="#ff7f0e">region growing alone</text><text x="{cx}" y="{by}" text-anchor="middle">Hoover tolerance T</text><text x="14" y="{cy}" transform="rotate(-90 14 {cy})" text-anchor="middle">correct detections per image</text></svg>"##,
+        x = pad + 10.0,
+        y1 = pad + 4.0,
+        y2 = pad + 20.0,
+        cx = w / 2.0,
+        by = h - 8.0,
+        cy = h / 2.0
+    );
+    s
+}
+
+/// A short plain-text summary for the terminal.
+pub(crate) fn summary(r: &Report) -> String {
+    let rows = &r.rows;
+    let m = |f: &dyn Fn(&ImageScores) -> f64| mean_std(rows.iter().map(|x| f(&x.scores))).0;
+    format!(
+        "Table I  F(1:1) raw {:.3}  plane {:.3} | Table II precision vs C1 {:.4} -> {:.4}, F {:.3} -> {:.3} | Hoover T=0.8 correct {:.2} of {:.2} (region growing {:.2})",
+        m(&|s| s.raw_canny.matched.f),
+        m(&|s| s.c2.matched.f),
+        m(&|s| opt(s.c2.paper_precision_c1)),
+        m(&|s| opt(s.relaxed.paper_precision_c1)),
+        m(&|s| s.c2.matched.f),
+        m(&|s| s.relaxed.matched.f),
+        m(&|s| f64::from(s.hoover_final.correct)),
+        m(&|s| f64::from(s.hoover_final.gt_regions)),
+        m(&|s| f64::from(s.hoover_regiongrow.correct)),
+    )
+}
+
+/// One CSV line per image with the main figures.
+fn csv(r: &Report) -> String {
+    let mut s = String::from(
+        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms\n",
+    );
+    for x in &r.rows {
+        let s_ = &x.scores;
+        let (h, g) = (&s_.hoover_final, &s_.hoover_regiongrow);
+        let _ = writeln!(
+            s,
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2}",
+            x.stem,
+            s_.raw_canny.matched.f,
+            opt(s_.raw_canny.paper_precision_c1),
+            s_.c2.matched.f,
+            opt(s_.c2.paper_precision_c1),
+            s_.c1.matched.f,
+            s_.relaxed.matched.f,
+            opt(s_.relaxed.paper_precision_c1),
+            h.gt_regions,
+            g.correct,
+            g.over,
+            g.under,
+            g.missed,
+            g.noise,
+            h.correct,
+            h.over,
+            h.under,
+            h.missed,
+            h.noise,
+            opt(h.angle_error_deg),
+            x.timings.features,
+            x.timings.regiongrow,
+            x.timings.vcanny,
+            x.timings.relax,
+            x.total_ms
+        );
+    }
+    s
+}
+
+/// Writes report.md, report.html, results.csv and results.json into `dir`, each atomically.
+pub(crate) fn write_all(r: &Report, dir: &Path) -> Result<()> {
+    let tables = tables(r);
+    let points = curve(r);
+    let gt_mean = mean_std(r.rows.iter().map(|x| f64::from(x.scores.hoover_final.gt_regions))).0;
+    let intro = format!(
+        "Data: `{}` ({} test images). Config: `{}`.\nFigures per image: shaded range, GT edges, C2 / region map, C1, final edges (as the paper's Fig. 2).",
+        r.data_dir,
+        r.rows.len(),
+        r.config_path
+    );
+
+    let mut md = format!("# rangeseg evaluation\n\n{intro}\n\n");
+    for (title, note, header, rows) in &tables {
+        let _ = write!(md, "## {title}\n\n{note}\n\n{}\n", md_table(header, rows));
+    }
+    md.push_str("## Correct detections over T\n\n| T | region growing | final |\n|---|---|---|\n");
+    for (t, a, b) in &points {
+        let _ = writeln!(md, "| {t:.2} | {a:.2} | {b:.2} |");
+    }
+    let _ = write!(md, "\n## Configuration\n\n```toml\n{}```\n\n## Figures\n\n", r.config_toml);
+    for x in &r.rows {
+        let _ = writeln!(md, "![{}](figures/{}.png)", x.stem, x.stem);
+    }
+
+    let mut html = String::from(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>rangeseg evaluation</title><style>body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}table{border-collapse:collapse;margin:1em 0;font-size:13px}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:first-child,th:first-child{text-align:left}th{background:#f3f3f3}figure{margin:1.5em 0}figure img{max-width:100%;border:1px solid #ddd}pre{background:#f7f7f7;padding:1em;overflow:auto}</style></head><body><h1>rangeseg evaluation</h1>",
+    );
+    let _ = write!(html, "<p>{}</p>", esc(&intro).replace('\n', "<br>"));
+    for (title, note, header, rows) in &tables {
+        let _ = write!(html, "<h2>{}</h2><p>{}</p>{}", esc(title), esc(note), html_table(header, rows));
+    }
+    let _ = write!(html, "<h2>Correct detections over T</h2>{}", curve_svg(&points, gt_mean));
+    let _ = write!(html, "<h2>Configuration</h2><pre>{}</pre><h2>Figures</h2>", esc(&r.config_toml));
+    for x in &r.rows {
+        let bytes = std::fs::read(&x.figure)
+            .with_context(|| format!("{}: cannot read figure", x.figure.display()))?;
+        let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
+        let _ = write!(
+            html,
+            "<figure><img alt=\"{s}\" src=\"data:image/png;base64,{b64}\"><figcaption>{s}: shaded range · GT edges · C2 / region map · C1 · final edges</figcaption></figure>",
+            s = esc(&x.stem)
+        );
+    }
+    html.push_str("</body></html>\n");
+
+    let json = serde_json::to_string_pretty(&r.rows).context("serialising results")?;
+    for (name, text) in
+        [("report.md", md), ("report.html", html), ("results.csv", csv(r)), ("results.json", json)]
+    {
+        rangeio::write_atomic(&dir.join(name), text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Nearest-neighbour label colours (0 black), as the region PNGs show them.
+fn gray(v: u8) -> [u8; 3] {
+    [v, v, v]
+}
+
+/// Panel of an edge map: black edges on white; downsampled by `f` with "any edge" pooling.
+fn edge_panel(e: &EdgeMap, f: u32) -> Grid<[u8; 3]> {
+    Grid::from_fn(e.width() / f, e.height() / f, |x, y| {
+        let any = (0..f).any(|dy| (0..f).any(|dx| e[(x * f + dx, y * f + dy)]));
+        gray(if any { 0 } else { 255 })
+    })
+}
+
+/// The paper's Fig. 2 for one image: shaded range, GT edges, C2 / region map, C1, final edges (2 × 3 panels).
+pub(crate) fn figure(range: &RangeImage, gt: &LabelImage, out: &Output) -> Grid<[u8; 3]> {
+    let f = if range.width() > 320 { 2 } else { 1 };
+    let shade = rangeseg::features::shade(range);
+    let shaded = Grid::from_fn(range.width() / f, range.height() / f, |x, y| {
+        let mut s = 0u32;
+        for dy in 0..f {
+            for dx in 0..f {
+                s += u32::from(shade[(x * f + dx, y * f + dy)]);
+            }
+        }
+        gray((s / (f * f)) as u8)
+    });
+    let regions = Grid::from_fn(range.width() / f, range.height() / f, |x, y| {
+        rangeio::png::label_color(out.fin.labels[(x * f, y * f)])
+    });
+    let panels = [
+        shaded,
+        edge_panel(&eval::boundary::gt_boundaries(gt), f),
+        edge_panel(&out.canny.edges, f),
+        regions,
+        edge_panel(&out.regions.c1, f),
+        edge_panel(out.fin.edges(), f),
+    ];
+    let (pw, ph, gap) = (panels[0].width(), panels[0].height(), 4);
+    let (cols, rows) = (3, 2);
+    let mut fig = Grid::new(cols * pw + (cols - 1) * gap, rows * ph + (rows - 1) * gap, [255u8; 3]);
+    for (i, p) in panels.iter().enumerate() {
+        let (ox, oy) = ((i as u32 % cols) * (pw + gap), (i as u32 / cols) * (ph + gap));
+        for (x, y, v) in p.enumerate() {
+            fig[(ox + x, oy + y)] = *v;
+        }
+    }
+    fig
+}

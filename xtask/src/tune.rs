@@ -1,0 +1,334 @@
+//! `cargo xtask tune`: a parameter grid over the training split, with stage outputs cached.
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use rangeimage::{Camera, LabelImage, RangeImage, SurfaceFeatures};
+use rangeio::abw::Dataset;
+use rangeseg::Config;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Objectives a grid can maximise, with what each measures on the training split.
+const OBJECTIVES: &[(&str, &str)] = &[
+    (
+        "hoover_correct",
+        "mean Hoover correct detections at T = 0.8 minus half the over- and under-segmentations",
+    ),
+    ("boundary_f", "mean one-to-one boundary F (τ = 2 px) of the final edge map"),
+    ("paper_precision", "mean paper precision of the final edge map against C1 (the paper's protocol)"),
+];
+
+/// The tuning file: a base config, an objective and a grid of dotted keys.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TuneFile {
+    /// Base configuration, relative to the tuning file.
+    base: String,
+    /// Objective name (see `OBJECTIVES`).
+    objective: String,
+    /// Dotted key → values.
+    grid: BTreeMap<String, Vec<toml::Value>>,
+}
+
+/// One training image, read once.
+struct Image {
+    stem: String,
+    range: RangeImage,
+    camera: Camera,
+    gt: LabelImage,
+    angles: Vec<(u32, u32, f64)>,
+}
+
+/// A value computed once per key, shared between the grid's combinations.
+struct Cache<V> {
+    map: Mutex<BTreeMap<String, Arc<OnceLock<Arc<V>>>>>,
+}
+
+impl<V> Cache<V> {
+    fn new() -> Self {
+        Self { map: Mutex::new(BTreeMap::new()) }
+    }
+
+    fn get(&self, key: String, compute: impl FnOnce() -> V) -> Arc<V> {
+        let cell = self.map.lock().expect("cache lock").entry(key).or_default().clone();
+        cell.get_or_init(|| Arc::new(compute())).clone()
+    }
+}
+
+/// The per-image numbers the objectives are computed from.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sample {
+    correct: f64,
+    over: f64,
+    under: f64,
+    gt_regions: f64,
+    rg_correct: f64,
+    f: f64,
+    c2_f: f64,
+    pp: f64,
+}
+
+fn objective(name: &str, s: &Sample) -> f64 {
+    match name {
+        "hoover_correct" => s.correct - 0.5 * (s.over + s.under),
+        "boundary_f" => s.f,
+        "paper_precision" => s.pp,
+        _ => unreachable!("objective names are checked when the grid is read"),
+    }
+}
+
+/// Runs `cargo xtask tune`.
+pub fn run(root: &Path, args: &[String]) -> Result<()> {
+    let mut grid_path = root.join("configs/tune.toml");
+    let mut objective_name: Option<String> = None;
+    let mut write = false;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--grid" => grid_path = it.next().context("--grid needs a file")?.into(),
+            "--objective" => objective_name = Some(it.next().context("--objective needs a name")?.clone()),
+            "--write" => write = true,
+            other => bail!(
+                "unknown option {other}\nusage: cargo xtask tune [--grid configs/tune.toml] [--objective NAME] [--write]"
+            ),
+        }
+    }
+    let text = std::fs::read_to_string(&grid_path)
+        .with_context(|| format!("{}: cannot read", grid_path.display()))?;
+    let tune: TuneFile =
+        toml::from_str(&text).with_context(|| format!("{}: invalid tuning file", grid_path.display()))?;
+    let objective_name = objective_name.unwrap_or(tune.objective.clone());
+    if !OBJECTIVES.iter().any(|(n, _)| *n == objective_name) {
+        let names: Vec<_> = OBJECTIVES.iter().map(|(n, _)| *n).collect();
+        bail!("{}: unknown objective {objective_name:?} (known: {})", grid_path.display(), names.join(", "));
+    }
+    let base_path = grid_path.parent().unwrap_or(Path::new(".")).join(&tune.base);
+    let base_text = std::fs::read_to_string(&base_path)
+        .with_context(|| format!("{}: cannot read", base_path.display()))?;
+    let base: toml::Table =
+        toml::from_str(&base_text).with_context(|| format!("{}: invalid TOML", base_path.display()))?;
+    let combos = expand_grid(&base, &tune.grid, &grid_path)?;
+
+    let data = crate::gen_data::ensure_synthetic_data(root)?;
+    let dataset = Dataset::discover(&data)?;
+    // Tuning reads the training split only: the test split is never touched here.
+    let images = read_images(&dataset)?;
+    eprintln!(
+        "tuning {} combinations × {} training images, objective {objective_name}",
+        combos.len(),
+        images.len()
+    );
+
+    let features_cache: Cache<SurfaceFeatures> = Cache::new();
+    // Region growing and Canny are cached with their own scores, which do not depend on the later stages.
+    let regions_cache: Cache<(regiongrow::Segmentation, f64)> = Cache::new();
+    let canny_cache: Cache<(vcanny::Edges, f64)> = Cache::new();
+
+    let bar = ProgressBar::new((combos.len() * images.len()) as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}")
+            .expect("template"),
+    );
+    let jobs: Vec<(usize, usize)> =
+        (0..combos.len()).flat_map(|c| (0..images.len()).map(move |i| (c, i))).collect();
+    let samples: Vec<Sample> = jobs
+        .par_iter()
+        .map(|&(c, i)| {
+            let (_, config) = &combos[c];
+            let img = &images[i];
+            let fkey = format!("{}|{}", img.stem, toml_of(&config.features));
+            let features =
+                features_cache.get(fkey.clone(), || features::compute(&img.range, &config.features));
+            let rkey = format!("{fkey}|{}|{}", toml_of(&config.regiongrow), config.seed);
+            let regions = regions_cache.get(rkey, || {
+                let (seg, _) =
+                    regiongrow::grow(&img.range, &features, &img.camera, &config.regiongrow, config.seed);
+                let h = rangeseg::evaluate::hoover(&img.gt, &seg.labels, &seg.regions, &img.angles);
+                (seg, f64::from(h.correct))
+            });
+            let ckey = format!("{fkey}|{}", toml_of(&config.vcanny));
+            let canny = canny_cache.get(ckey, || {
+                let e = vcanny::detect_planes(
+                    &features.plane,
+                    &rangeimage::valid_mask(&img.range),
+                    &config.vcanny,
+                );
+                let f = eval::boundary::matched(&e.edges, &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
+                (e, f)
+            });
+            let fin =
+                rangeseg::pipeline::finish(&img.range, &img.camera, config, &features, &regions.0, &canny.0);
+            let h = rangeseg::evaluate::hoover(&img.gt, &fin.labels, &fin.final_regions, &img.angles);
+            let f = eval::boundary::matched(fin.edges(), &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
+            let pp = eval::paper_precision(fin.edges(), &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX)
+                .unwrap_or(0.0);
+            bar.inc(1);
+            Sample {
+                correct: f64::from(h.correct),
+                over: f64::from(h.over),
+                under: f64::from(h.under),
+                gt_regions: f64::from(h.gt_regions),
+                rg_correct: regions.1,
+                f,
+                c2_f: canny.1,
+                pp,
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+
+    // Average per combination in a fixed order (rayon's float reductions depend on scheduling).
+    let n = images.len() as f64;
+    let means: Vec<(Sample, f64)> = (0..combos.len())
+        .map(|c| {
+            let rows = &samples[c * images.len()..(c + 1) * images.len()];
+            let mut m = Sample::default();
+            for s in rows {
+                m.correct += s.correct / n;
+                m.over += s.over / n;
+                m.under += s.under / n;
+                m.gt_regions += s.gt_regions / n;
+                m.rg_correct += s.rg_correct / n;
+                m.f += s.f / n;
+                m.c2_f += s.c2_f / n;
+                m.pp += s.pp / n;
+            }
+            let score = objective(&objective_name, &m);
+            (m, score)
+        })
+        .collect();
+    // Best: highest score; ties go to the earlier combination (grid order), so the choice is deterministic.
+    let best = (0..means.len()).fold(0, |b, c| if means[c].1 > means[b].1 { c } else { b });
+
+    let out = root.join("target/tune");
+    std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let keys: Vec<&String> = tune.grid.keys().collect();
+    let mut csv = keys.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(",");
+    csv.push_str(",objective,correct,over,under,gt_regions,rg_correct,f,c2_f,paper_precision\n");
+    for (c, (m, score)) in means.iter().enumerate() {
+        let vals: Vec<String> = combos[c].0.iter().map(|v| v.to_string()).collect();
+        let _ = writeln!(
+            csv,
+            "{},{score:.5},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}",
+            vals.join(","),
+            m.correct,
+            m.over,
+            m.under,
+            m.gt_regions,
+            m.rg_correct,
+            m.f,
+            m.c2_f,
+            m.pp
+        );
+    }
+    let best_config = &combos[best].1;
+    let best_toml = best_config.to_toml();
+    let (bm, bs) = &means[best];
+    let mut report = format!(
+        "# rangeseg tuning\n\nGrid `{}` ({} combinations) over the {} training images; objective `{objective_name}`: {}.\n\n",
+        grid_path.display(),
+        combos.len(),
+        images.len(),
+        OBJECTIVES.iter().find(|(n, _)| *n == objective_name).map(|(_, d)| *d).unwrap_or("")
+    );
+    let _ = writeln!(report, "## Best combination (objective {bs:.4})\n");
+    for (k, v) in keys.iter().zip(&combos[best].0) {
+        let _ = writeln!(report, "- `{k}` = {v}");
+    }
+    let _ = writeln!(
+        report,
+        "\nTraining means: correct {:.2} of {:.2} GT regions (region growing alone {:.2}), over {:.2}, under {:.2}, boundary F {:.4} (C2 alone {:.4}), paper precision vs C1 {:.4}.",
+        bm.correct, bm.gt_regions, bm.rg_correct, bm.over, bm.under, bm.f, bm.c2_f, bm.pp
+    );
+    for (name, text) in
+        [("results.csv", csv), ("best.toml", best_toml.clone()), ("report.md", report.clone())]
+    {
+        rangeio::write_atomic(&out.join(name), text.as_bytes())?;
+    }
+    eprintln!("{report}");
+    eprintln!("wrote {}", out.display());
+    if write {
+        let path = root.join("configs/default.toml");
+        let text = format!(
+            "# Tuned by `cargo xtask tune` on the training split (objective {objective_name}).\n# Every key is documented on its Params struct; this file must equal Config::default().\n\n{best_toml}"
+        );
+        rangeio::write_atomic(&path, text.as_bytes())?;
+        eprintln!("updated {}", path.display());
+    }
+    Ok(())
+}
+
+/// A stage's parameters as canonical TOML text, the cache key of what it computes.
+fn toml_of<T: serde::Serialize>(v: &T) -> String {
+    toml::to_string(v).expect("params serialise")
+}
+
+/// Every combination of the grid as (values in key order, validated config).
+fn expand_grid(
+    base: &toml::Table,
+    grid: &BTreeMap<String, Vec<toml::Value>>,
+    grid_path: &Path,
+) -> Result<Vec<(Vec<toml::Value>, Config)>> {
+    let mut combos: Vec<Vec<toml::Value>> = vec![Vec::new()];
+    for (key, values) in grid {
+        if values.is_empty() {
+            bail!("{}: grid key {key} has no values", grid_path.display());
+        }
+        combos = combos
+            .into_iter()
+            .flat_map(|c| values.iter().map(move |v| [c.clone(), vec![v.clone()]].concat()))
+            .collect();
+    }
+    combos
+        .into_iter()
+        .map(|values| {
+            let mut table = base.clone();
+            for (key, value) in grid.keys().zip(&values) {
+                set_dotted(&mut table, key, value.clone())
+                    .with_context(|| format!("{}: grid key {key}", grid_path.display()))?;
+            }
+            let config = Config::from_table(table, grid_path)?;
+            Ok((values, config))
+        })
+        .collect()
+}
+
+/// Sets `a.b.c = value` in a TOML table, creating intermediate tables.
+fn set_dotted(table: &mut toml::Table, key: &str, value: toml::Value) -> Result<()> {
+    let mut parts: Vec<&str> = key.split('.').collect();
+    let last = parts.pop().context("empty key")?;
+    let mut t = table;
+    for p in parts {
+        t = t
+            .entry(p)
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+            .with_context(|| format!("{p} is not a table"))?;
+    }
+    t.insert(last.to_string(), value);
+    Ok(())
+}
+
+/// Reads the training images with their ground truth.
+fn read_images(dataset: &Dataset) -> Result<Vec<Image>> {
+    if dataset.train.is_empty() {
+        bail!("no training images (abw.train.N.range)");
+    }
+    dataset
+        .train
+        .iter()
+        .map(|img| {
+            let range = rangeio::abw::read_range(&img.range)?;
+            let gt_path: &PathBuf =
+                img.gt_seg.as_ref().with_context(|| format!("{}: no .gt-seg", img.stem))?;
+            let gt = rangeio::abw::read_labels(gt_path, true)?;
+            let angles = match &img.gt_ang {
+                Some(p) => rangeio::abw::read_angles(p)?.iter().map(|a| (a.a, a.b, a.angle_deg)).collect(),
+                None => Vec::new(),
+            };
+            Ok(Image { stem: img.stem.clone(), range, camera: img.camera, gt, angles })
+        })
+        .collect()
+}
