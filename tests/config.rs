@@ -17,6 +17,7 @@ fn default_toml_is_default() {
 #[test]
 fn paper_toml_loads_and_differs_from_default() {
     let config = Config::load(&root().join("configs/paper.toml")).unwrap();
+    assert_eq!(config, Config::paper(), "configs/paper.toml and Config::paper() differ");
     assert_ne!(config, Config::default());
     assert_eq!(config.regiongrow.mode, regiongrow::Mode::Paper);
 }

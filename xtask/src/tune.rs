@@ -252,7 +252,7 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     if write {
         let path = root.join("configs/default.toml");
         let text = format!(
-            "# Tuned by `cargo xtask tune` on the training split (objective {objective_name}).\n# Every key is documented on its Params struct; this file must equal Config::default().\n\n{best_toml}"
+            "# The default configuration: our best, tuned on the training split by `cargo xtask tune --write`\n# (objective {objective_name}). It must equal Config::default() (a test checks it): after --write,\n# copy the changed values into the stages' Params::default().\n\n{best_toml}"
         );
         rangeio::write_atomic(&path, text.as_bytes())?;
         eprintln!("updated {}", path.display());

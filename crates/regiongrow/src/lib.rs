@@ -120,8 +120,8 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             mode: Mode::Default,
-            t_sigma: 0.02,
-            t_m: 0.02,
+            t_sigma: 0.08,
+            t_m: 0.005,
             min_seeds: 1,
             max_seeds: 10_000,
             max_k_diff: 0.01,

@@ -68,16 +68,16 @@ pub struct Params {
     pub normalize: bool,
 }
 
-/// Defaults: `t_d_px` and `lambda` were picked on the synthetic training split
-/// (`examples/relax_eval.rs --tune`, objective: mean boundary F of C at τ = 2); the schedule
+/// Defaults: `t_d_px` and `lambda` were picked by `cargo xtask tune` on the synthetic training split
+/// (objective `hoover_correct` of the whole pipeline, see `configs/tune.toml`); the schedule
 /// on the 512×512 bench case: the lowest energy within a 50 ms budget (7 sweeps at δ = 0.7
 /// reach E 23426 → 8601 there; the former δ = 0.3 / 20-sweep schedule ran 18 sweeps to 7518 in
 /// about three times the time; colder is better here, δ = 0.5 needs 8 sweeps for 8473).
 impl Default for Params {
     fn default() -> Self {
         Self {
-            t_d_px: 4.0,
-            lambda: 0.3,
+            t_d_px: 6.0,
+            lambda: 1.0,
             t0: 0.0,
             auto_t0_acceptance: 0.01,
             cooling_delta: 0.7,
