@@ -1,8 +1,27 @@
 //! Writing one image's pipeline results to disk in the ABW formats and as PNGs.
 
 use crate::pipeline::Output;
+use rangeimage::{LabelImage, Region};
 use rangeio::Frame;
 use std::path::Path;
+
+/// Writes `labels` as an ABW `.ms-seg` (renumbered from 10 as the format needs) and the regions' normals as a
+/// `.ms-nor` under the same labels; returns the `(label, written label)` pairs.
+pub fn write_segmentation(
+    seg_path: &Path,
+    nor_path: &Path,
+    labels: &LabelImage,
+    regions: &[Region],
+) -> Result<Vec<(u32, u8)>, rangeio::WriteError> {
+    let mapping = rangeio::abw::write_labels(seg_path, labels)?;
+    let normals: Vec<(u32, [f32; 3])> = mapping
+        .iter()
+        .filter(|&&(_, new)| new != 0)
+        .filter_map(|&(old, new)| regions.iter().find(|r| r.label == old).map(|r| (u32::from(new), r.normal)))
+        .collect();
+    rangeio::abw::write_normals(nor_path, &normals)?;
+    Ok(mapping)
+}
 
 /// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png` and `STEM.regions.png`
 /// into `dir`, each atomically, and returns a JSON summary (counts, energies) for `STEM.json`.
@@ -14,14 +33,8 @@ pub fn write_outputs(
 ) -> Result<serde_json::Value, rangeio::WriteError> {
     let _s = tracing::info_span!("write_outputs", stem).entered();
     let path = |ext: &str| dir.join(format!("{stem}.{ext}"));
-    let mapping = rangeio::abw::write_labels(&path("ms-seg"), &out.fin.labels)?;
-    let normals: Vec<(u32, [f32; 3])> = mapping
-        .iter()
-        .filter_map(|&(old, new)| {
-            out.fin.final_regions.iter().find(|r| r.label == old).map(|r| (u32::from(new), r.normal))
-        })
-        .collect();
-    rangeio::abw::write_normals(&path("ms-nor"), &normals)?;
+    let mapping =
+        write_segmentation(&path("ms-seg"), &path("ms-nor"), &out.fin.labels, &out.fin.final_regions)?;
     rangeio::png::write_edge_png(&path("edges.png"), out.fin.edges())?;
     rangeio::png::write_edge_png(&path("c1.png"), &out.regions.c1)?;
     rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;

@@ -1,8 +1,7 @@
 //! `rangeseg edges`: Canny on plane parameters (or raw depth), written as a binary edge PNG.
 
-use anyhow::Context;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Arguments of `rangeseg edges`.
@@ -17,39 +16,22 @@ pub(crate) struct Args {
     /// Run Canny on the raw depth instead of the plane parameters (the paper's baseline).
     #[arg(long)]
     raw: bool,
-    /// TOML file with optional `[features]` and `[vcanny]` tables (other tables are ignored).
+    /// Configuration file (see `configs/`; this command uses `[features]`, `[vcanny]` and, with --raw, `[raw_canny]`).
     #[arg(long, value_name = "C.toml")]
     config: Option<PathBuf>,
-}
-
-/// The parts of a config file this command uses.
-#[derive(Debug, Default, serde::Deserialize)]
-struct EdgeConfig {
-    #[serde(default)]
-    features: features::Params,
-    #[serde(default)]
-    vcanny: vcanny::Params,
-}
-
-fn load_config(path: &Path) -> anyhow::Result<EdgeConfig> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("{}: cannot read config", path.display()))?;
-    let cfg: EdgeConfig =
-        toml::from_str(&text).with_context(|| format!("{}: invalid config", path.display()))?;
-    cfg.features.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    cfg.vcanny.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    Ok(cfg)
+    #[command(flatten)]
+    read: super::info::ReadArgs,
 }
 
 /// Runs `rangeseg edges`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let cfg = match &args.config {
-        Some(p) => load_config(p)?,
-        None => EdgeConfig::default(),
+        Some(path) => rangeseg::Config::load(path)?,
+        None => rangeseg::Config::default(),
     };
-    let frame = rangeio::read(&args.file, &Default::default())?;
+    let frame = rangeio::read(&args.file, &args.read.options())?;
     let edges = if args.raw {
-        vcanny::detect_raw(&frame.range, &cfg.vcanny)
+        vcanny::detect_raw(&frame.range, &cfg.raw_canny)
     } else {
         let plane = features::fit_planes(&frame.range, cfg.features.window_px);
         let valid = rangeimage::valid_mask(&frame.range);
