@@ -154,7 +154,8 @@ impl Config {
     }
 }
 
-/// Temporary preset of the raw-depth baseline until vcanny exposes its own.
+/// The raw-depth Canny baseline's thresholds (quantiles 0.80 / 0.95 of the magnitude), the best found on the
+/// training split by `cargo run --release --example table1 -- --tune`.
 fn vcanny_raw_preset() -> vcanny::Params {
     vcanny::Params {
         thresholds: vcanny::Thresholds {
