@@ -80,10 +80,9 @@ fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| {
                     p.is_file()
-                        && p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                            RANGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())
-                                && !p.to_string_lossy().ends_with(".c1.png")
-                        })
+                        && p.extension()
+                            .and_then(|e| e.to_str())
+                            .is_some_and(|e| RANGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
                 })
                 .collect();
             found.sort();

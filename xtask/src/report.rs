@@ -427,7 +427,7 @@ pub(crate) fn write_all(r: &Report, dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Nearest-neighbour label colours (0 black), as the region PNGs show them.
+/// A gray RGB pixel.
 fn gray(v: u8) -> [u8; 3] {
     [v, v, v]
 }
