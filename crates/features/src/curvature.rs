@@ -1,97 +1,173 @@
-//! Curvatures from the quadratic-fit derivatives, and the windowed standard deviation of K.
+//! Curvatures from the quadratic-fit derivatives, and the windowed standard deviation of K, one row at a time.
 
-use rangeimage::Grid;
-
-/// Per-pixel curvatures: `(K, H, [k1, k2], curvedness)`.
-pub(crate) struct Curvatures {
-    pub(crate) k: Grid<f32>,
-    pub(crate) h: Grid<f32>,
-    pub(crate) principal: Grid<[f32; 2]>,
-    pub(crate) curvedness: Grid<f32>,
-}
-
-/// K, H, principal curvatures and curvedness of the graph surface from its derivatives (NaN propagates).
-pub(crate) fn curvatures(grad: &Grid<[f32; 2]>, hess: &Grid<[f32; 3]>) -> Curvatures {
-    let (w, h) = grad.dimensions();
+/// K, H, principal curvatures `[k1, k2]` (k1 ≥ k2) and curvedness of one row of the graph surface from its
+/// derivatives (NaN propagates). All slices have the row's length.
+///
+/// With `E = 1 + Ix²`, `F = Ix·Iy`, `G = 1 + Iy²`, `q = 1 + Ix² + Iy²` and `(L, M, N) = (Ixx, Ixy, Iyy)`:
+/// `K = (LN − M²)/q²`, `H = (EN − 2FM + GL)/(2q^{3/2})`, and the half-difference of the principal curvatures
+/// `d = sqrt(H² − K) = sqrt((EN − GL)² + 4(EM − FL)(GM − FN)) / (2q^{3/2})`. The last form has no cancellation
+/// at umbilics (where `H² ≈ K`), so f32 keeps `k1,2 = H ± d` accurate there. Curvedness `sqrt((k1² + k2²)/2) =
+/// sqrt(H² + d²)`.
+pub(crate) fn curvature_row(
+    grad: &[[f32; 2]],
+    hess: &[[f32; 3]],
+    k_out: &mut [f32],
+    h_out: &mut [f32],
+    principal: &mut [[f32; 2]],
+    curvedness: &mut [f32],
+) {
     let n = grad.len();
-    let (mut kv, mut hv, mut pv, mut cv) =
-        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-    for (g, s) in grad.as_slice().iter().zip(hess.as_slice()) {
-        let (ix, iy) = (f64::from(g[0]), f64::from(g[1]));
-        let (ixx, ixy, iyy) = (f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
-        let q = 1.0 + ix * ix + iy * iy;
-        let k = (ixx * iyy - ixy * ixy) / (q * q);
-        let hm = ((1.0 + iy * iy) * ixx - 2.0 * ix * iy * ixy + (1.0 + ix * ix) * iyy) / (2.0 * q * q.sqrt());
-        let disc = (hm * hm - k).max(0.0).sqrt();
-        let (k1, k2) = (hm + disc, hm - disc);
-        kv.push(k as f32);
-        hv.push(hm as f32);
-        pv.push([k1 as f32, k2 as f32]);
-        cv.push(((k1 * k1 + k2 * k2) / 2.0).sqrt() as f32);
-    }
-    Curvatures {
-        k: Grid::from_vec(w, h, kv).expect("size matches"),
-        h: Grid::from_vec(w, h, hv).expect("size matches"),
-        principal: Grid::from_vec(w, h, pv).expect("size matches"),
-        curvedness: Grid::from_vec(w, h, cv).expect("size matches"),
+    let (hess, k_out, h_out) = (&hess[..n], &mut k_out[..n], &mut h_out[..n]);
+    let (principal, curvedness) = (&mut principal[..n], &mut curvedness[..n]);
+    for i in 0..n {
+        let [ix, iy] = grad[i];
+        let [l, m, nn] = hess[i];
+        let (e, f, g) = (1.0 + ix * ix, ix * iy, 1.0 + iy * iy);
+        let inv_q = 1.0 / (1.0 + ix * ix + iy * iy);
+        let s = inv_q * inv_q.sqrt();
+        let k = (l * nn - m * m) * (inv_q * inv_q);
+        let h = 0.5 * (e * nn - 2.0 * f * m + g * l) * s;
+        let (a, b) = (e * nn - g * l, 4.0 * (e * m - f * l) * (g * m - f * nn));
+        let d = 0.5 * (a * a + b).max(0.0).sqrt() * s;
+        k_out[i] = k;
+        h_out[i] = h;
+        principal[i] = [h + d, h - d];
+        curvedness[i] = (h * h + d * d).sqrt();
     }
 }
 
-/// Standard deviation of the finite values of `k` over the `window_px × window_px` window of each pixel
-/// (clipped at the border); NaN where `k` itself is NaN. Running box sums, O(1) per pixel.
-pub(crate) fn window_std(k: &Grid<f32>, window_px: u32) -> Grid<f32> {
-    let (w, h) = k.dimensions();
-    let (wu, hu) = (w as usize, h as usize);
-    let r = (window_px / 2) as usize;
-    // Row pass: [count, Σk, Σk²] over x - r ..= x + r via prefix sums.
-    let mut rows = vec![[0.0f64; 3]; wu * hu];
-    let mut prefix = vec![[0.0f64; 3]; wu + 1];
-    for y in 0..hu {
-        let src = &k.as_slice()[y * wu..(y + 1) * wu];
-        let mut p = [0.0f64; 3];
-        for (x, &v) in src.iter().enumerate() {
-            if v.is_finite() {
-                let v = f64::from(v);
-                p = [p[0] + 1.0, p[1] + v, p[2] + v * v];
-            }
-            prefix[x + 1] = p;
-        }
-        for x in 0..wu {
-            let lo = prefix[x.saturating_sub(r)];
-            let hi = prefix[(x + r + 1).min(wu)];
-            rows[y * wu + x] = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
-        }
-    }
-    // Column pass: running sums down each column.
-    let mut out = vec![f32::NAN; wu * hu];
-    let mut acc = vec![[0.0f64; 3]; wu];
-    for y in 0..r.min(hu) {
-        for (a, s) in acc.iter_mut().zip(&rows[y * wu..(y + 1) * wu]) {
-            *a = [a[0] + s[0], a[1] + s[1], a[2] + s[2]];
-        }
-    }
-    for y in 0..hu {
-        if y + r < hu {
-            let yy = y + r;
-            for (a, s) in acc.iter_mut().zip(&rows[yy * wu..(yy + 1) * wu]) {
-                *a = [a[0] + s[0], a[1] + s[1], a[2] + s[2]];
-            }
-        }
-        if y > r {
-            let yy = y - r - 1;
-            for (a, s) in acc.iter_mut().zip(&rows[yy * wu..(yy + 1) * wu]) {
-                *a = [a[0] - s[0], a[1] - s[1], a[2] - s[2]];
-            }
-        }
-        for x in 0..wu {
-            if !k.as_slice()[y * wu + x].is_finite() {
-                continue;
-            }
-            let [n, s1, s2] = acc[x];
-            let n = n.round();
-            let mean = s1 / n;
-            out[y * wu + x] = (s2 / n - mean * mean).max(0.0).sqrt() as f32;
+/// Streaming standard deviation of the finite values of K over a `w × w` window (clipped at the border).
+///
+/// Feed the rows of K in order with [`WindowStd::push_row`]; row `y` of the result is available once rows up to
+/// `y + r` are in ([`WindowStd::out_row`], called for `y = 0, 1, …` in order). Per row: horizontal box sums
+/// `[count, Σk, Σk²]` in f64 over a padded row, kept in a ring of `w + 1` rows; vertically a running sum (add the
+/// row entering the window, subtract the row leaving), so the cost per pixel does not depend on the window height.
+pub(crate) struct WindowStd {
+    /// Row length, half window and image height.
+    wu: usize,
+    r: usize,
+    hu: usize,
+    /// Ring of horizontal sums, `w + 1` rows of `wu` each: count, Σk, Σk².
+    ring: [Vec<f64>; 3],
+    /// Vertical running sums of the current output row.
+    acc: [Vec<f64>; 3],
+    /// Next row to add to `acc`.
+    next_add: usize,
+    /// Padded row scratch (`wu + 2r`).
+    pad: [Vec<f64>; 3],
+}
+
+impl WindowStd {
+    /// A window of `window_px` (odd) over an image of `wu × hu`.
+    pub(crate) fn new(wu: usize, hu: usize, window_px: u32) -> Self {
+        let r = window_px as usize / 2;
+        let slots = 2 * r + 2;
+        Self {
+            wu,
+            r,
+            hu,
+            ring: std::array::from_fn(|_| vec![0.0; slots * wu]),
+            acc: std::array::from_fn(|_| vec![0.0; wu]),
+            next_add: 0,
+            pad: std::array::from_fn(|_| vec![0.0; wu + 2 * r]),
         }
     }
-    Grid::from_vec(w, h, out).expect("size matches")
+
+    /// Adds row `y` of K (rows in order).
+    pub(crate) fn push_row(&mut self, y: usize, k: &[f32]) {
+        let (wu, r) = (self.wu, self.r);
+        let [pc, p1, p2] = &mut self.pad;
+        let (pc, p1, p2) = (&mut pc[r..r + wu], &mut p1[r..r + wu], &mut p2[r..r + wu]);
+        for (i, &v) in k[..wu].iter().enumerate() {
+            let ok = v.is_finite();
+            let v = if ok { f64::from(v) } else { 0.0 };
+            pc[i] = if ok { 1.0 } else { 0.0 };
+            p1[i] = v;
+            p2[i] = v * v;
+        }
+        let slot = (y % (2 * r + 2)) * wu;
+        let [rc, r1, r2] = &mut self.ring;
+        let (c, s1, s2) = (&mut rc[slot..slot + wu], &mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
+        match r {
+            0 => box_row::<1>(&self.pad, c, s1, s2),
+            1 => box_row::<3>(&self.pad, c, s1, s2),
+            2 => box_row::<5>(&self.pad, c, s1, s2),
+            3 => box_row::<7>(&self.pad, c, s1, s2),
+            _ => {
+                let [pc, p1, p2] = &self.pad;
+                c.copy_from_slice(&pc[..wu]);
+                s1.copy_from_slice(&p1[..wu]);
+                s2.copy_from_slice(&p2[..wu]);
+                for j in 1..=2 * r {
+                    let (a, b, d) = (&pc[j..j + wu], &p1[j..j + wu], &p2[j..j + wu]);
+                    for i in 0..wu {
+                        c[i] += a[i];
+                        s1[i] += b[i];
+                        s2[i] += d[i];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Adds ring row `add` to the running sums and removes ring row `sub` (either may be absent).
+    fn update(&mut self, add: Option<usize>, sub: Option<usize>) {
+        let wu = self.wu;
+        let slots = 2 * self.r + 2;
+        for (acc, ring) in self.acc.iter_mut().zip(&self.ring) {
+            let row = |yy: usize| &ring[(yy % slots) * wu..(yy % slots + 1) * wu];
+            match (add, sub) {
+                (Some(a), Some(s)) => {
+                    for ((acc, &a), &s) in acc.iter_mut().zip(row(a)).zip(row(s)) {
+                        *acc += a - s;
+                    }
+                }
+                (Some(a), None) => acc.iter_mut().zip(row(a)).for_each(|(acc, &a)| *acc += a),
+                (None, Some(s)) => acc.iter_mut().zip(row(s)).for_each(|(acc, &s)| *acc -= s),
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Writes row `y` of the standard deviation (NaN where `k_row`, row `y` of K, is not finite); rows
+    /// `y − r ..= min(y + r, hu − 1)` must have been pushed, and rows `0..y` written before.
+    pub(crate) fn out_row(&mut self, y: usize, k_row: &[f32], out: &mut [f32]) {
+        let (wu, r) = (self.wu, self.r);
+        while self.next_add < (y + r).min(self.hu - 1) {
+            self.update(Some(self.next_add), None);
+            self.next_add += 1;
+        }
+        let add = (self.next_add <= (y + r).min(self.hu - 1)).then_some(self.next_add);
+        self.next_add += usize::from(add.is_some());
+        self.update(add, (y > r).then(|| y - r - 1));
+        let [n, s1, s2] = &self.acc;
+        let (k_row, out) = (&k_row[..wu], &mut out[..wu]);
+        // var = (n·Σk² − (Σk)²) / n²: the numerator in f64, the division and the square root in f32.
+        for i in 0..wu {
+            let num = (n[i] * s2[i] - s1[i] * s1[i]).max(0.0) as f32;
+            let sd = num.sqrt() / n[i] as f32;
+            out[i] = if k_row[i].is_finite() { sd } else { f32::NAN };
+        }
+    }
+}
+
+/// Horizontal box sums over `W` pixels of the padded rows `pad` (count, Σk, Σk²) into `c`, `s1`, `s2`: one pass,
+/// the window loop unrolled.
+fn box_row<const W: usize>(pad: &[Vec<f64>; 3], c: &mut [f64], s1: &mut [f64], s2: &mut [f64]) {
+    let wu = c.len();
+    let (s1, s2) = (&mut s1[..wu], &mut s2[..wu]);
+    let pc: [&[f64]; W] = std::array::from_fn(|j| &pad[0][j..j + wu]);
+    let p1: [&[f64]; W] = std::array::from_fn(|j| &pad[1][j..j + wu]);
+    let p2: [&[f64]; W] = std::array::from_fn(|j| &pad[2][j..j + wu]);
+    for i in 0..wu {
+        let (mut a, mut b, mut d) = (pc[0][i], p1[0][i], p2[0][i]);
+        for j in 1..W {
+            a += pc[j][i];
+            b += p1[j][i];
+            d += p2[j][i];
+        }
+        c[i] = a;
+        s1[i] = b;
+        s2[i] = d;
+    }
 }

@@ -1,14 +1,21 @@
 //! Per-pixel local planes, derivatives and curvatures of a range image (SPEC §3.1).
 //!
 //! - [`fit_planes`]: least-squares plane `z = a·x + b·y + c` per pixel over the valid pixels of a `w × w` window,
-//!   x and y measured from the image centre, by running box sums (O(1) per pixel).
+//!   x and y measured from the image centre.
 //! - [`compute`]: the plane, the derivatives of a least-squares quadratic (2D Savitzky–Golay, kernels from faer's
 //!   QR), Gaussian and mean curvature, principal curvatures, curvedness and the windowed standard deviation of K.
+//!
+//! Both run one pass over the output rows (module `fit`): windows that are entirely valid and inside the image use
+//! separable f32 filters on differences of nearby depths (small constant cost per pixel); windows clipped by the
+//! border or holding no-data are fitted exactly to their valid pixels in f64. The curvatures (f32, in a form without
+//! cancellation at umbilics) and the running-sum standard deviation of K (f64 sums) follow in the same row loop,
+//! written straight into the output grids.
 //! - [`shade`]: a Lambertian rendering for figures.
 //!
 //! No-data pixels (NaN) never enter a fit, and every output is NaN at no-data pixels.
 
 mod curvature;
+mod fit;
 mod plane;
 mod quadratic;
 mod shade;
@@ -58,25 +65,88 @@ pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
     if let Err(e) = params.validate() {
         panic!("invalid features params: {e}");
     }
-    let plane = plane::fit(range, params.window_px);
-    let kernels = quadratic::SgKernels::new(params.deriv_window_px);
-    let (gradient, hessian) = quadratic::derivatives(range, &kernels);
-    let c = curvature::curvatures(&gradient, &hessian);
-    let k_std = curvature::window_std(&c.k, params.k_std_window_px);
+    let f = compute_with(range, params, fit::Path::Fast);
     tracing::debug!(
-        valid_planes = plane.as_slice().iter().filter(|p| p[0].is_finite()).count(),
-        valid_k = c.k.as_slice().iter().filter(|v| v.is_finite()).count(),
+        valid_planes = f.plane.as_slice().iter().filter(|p| p[0].is_finite()).count(),
+        valid_k = f.k.as_slice().iter().filter(|v| v.is_finite()).count(),
         "features done"
     );
+    f
+}
+
+/// [`compute`] without the checks; `path` selects the code of the full windows (the tests compare them).
+///
+/// One pass over the output rows: the fits of row `y` (one engine, or two if the plane and the derivative windows
+/// differ), its curvatures, and the standard deviation of K of row `y − r` (r = half the K window), written straight
+/// into the output grids.
+fn compute_with(range: &RangeImage, params: &Params, path: fit::Path) -> SurfaceFeatures {
+    let (w, h) = range.dimensions();
+    let (wu, hu) = (w as usize, h as usize);
+    let src = range.as_slice();
+    let mut quad = fit::RowFitter::new(src, wu, hu, params.deriv_window_px, path);
+    let mut plane_fitter = (params.window_px != params.deriv_window_px)
+        .then(|| fit::RowFitter::new(src, wu, hu, params.window_px, path));
+    let mut kstd = curvature::WindowStd::new(wu, hu, params.k_std_window_px);
+    let rk = (params.k_std_window_px / 2) as usize;
+    let n = wu * hu;
+    let (mut plane, mut gradient, mut hessian) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut k, mut hm, mut principal, mut curvedness, mut k_std) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    let (mut scratch_plane, mut scratch_grad, mut scratch_hess) =
+        (vec![[0.0f32; 3]; wu], vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
+    let nan = f32::NAN;
+    for y in 0..hu {
+        let row = y * wu..(y + 1) * wu;
+        plane.resize(row.end, [nan; 3]);
+        gradient.resize(row.end, [nan; 2]);
+        hessian.resize(row.end, [nan; 3]);
+        let (g, s) = (&mut gradient[row.clone()], &mut hessian[row.clone()]);
+        match &mut plane_fitter {
+            None => quad.row(y, &mut plane[row.clone()], g, s),
+            Some(pf) => {
+                quad.row(y, &mut scratch_plane, g, s);
+                pf.row(y, &mut plane[row.clone()], &mut scratch_grad, &mut scratch_hess);
+            }
+        }
+        k.resize(row.end, nan);
+        hm.resize(row.end, nan);
+        principal.resize(row.end, [nan; 2]);
+        curvedness.resize(row.end, nan);
+        curvature::curvature_row(
+            &gradient[row.clone()],
+            &hessian[row.clone()],
+            &mut k[row.clone()],
+            &mut hm[row.clone()],
+            &mut principal[row.clone()],
+            &mut curvedness[row.clone()],
+        );
+        kstd.push_row(y, &k[row.clone()]);
+        if y >= rk {
+            let yo = y - rk;
+            k_std.resize((yo + 1) * wu, nan);
+            kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut k_std[yo * wu..]);
+        }
+    }
+    for yo in hu.saturating_sub(rk)..hu {
+        k_std.resize((yo + 1) * wu, nan);
+        kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut k_std[yo * wu..]);
+    }
+    let grid = |v| Grid::from_vec(w, h, v).expect("size matches");
     SurfaceFeatures {
-        plane,
-        gradient,
-        hessian,
-        k: c.k,
-        h: c.h,
-        principal: c.principal,
-        curvedness: c.curvedness,
-        k_std,
+        plane: Grid::from_vec(w, h, plane).expect("size matches"),
+        gradient: Grid::from_vec(w, h, gradient).expect("size matches"),
+        hessian: Grid::from_vec(w, h, hessian).expect("size matches"),
+        k: grid(k),
+        h: grid(hm),
+        principal: Grid::from_vec(w, h, principal).expect("size matches"),
+        curvedness: grid(curvedness),
+        k_std: grid(k_std),
     }
 }
 
@@ -357,6 +427,167 @@ mod tests {
         assert!(f.k_std[(35, 15)] < 1e-8, "plane: {}", f.k_std[(35, 15)]);
         assert!(f.k_std[(20, 15)] > 1e-5, "junction: {}", f.k_std[(20, 15)]);
         assert!(f.k_std.as_slice().iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+
+    /// A random piecewise-smooth range image with holes: quadratic patches, a jump and a crease, additive noise,
+    /// optionally rounded to integers (8-bit like), scaled by `scale`, with random no-data blobs, single no-data
+    /// pixels and a few ±∞ values.
+    fn random_image(seed: u64, w: u32, h: u32, scale: f64, quantise: bool) -> RangeImage {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut c = [0.0f64; 12];
+        for v in &mut c {
+            *v = rng.random_range(-1.0..1.0);
+        }
+        let (split, crease) =
+            (rng.random_range(0.3..0.7) * f64::from(w), rng.random_range(0.2..0.8) * f64::from(h));
+        let mut img = Grid::from_fn(w, h, |x, y| {
+            let (x, y) = (f64::from(x), f64::from(y));
+            let z = if x < split {
+                120.0 + 0.8 * c[0] * x + 0.8 * c[1] * y + 0.01 * (c[2] * x * x + c[3] * x * y + c[4] * y * y)
+            } else {
+                150.0 + 0.5 * c[5] * x + 0.5 * c[6] * y + 0.8 * c[7] * (y - crease).abs()
+            };
+            z as f32
+        });
+        for v in img.as_mut_slice() {
+            let z = f64::from(*v) + rng.random_range(-0.7..0.7);
+            *v = ((if quantise { z.round() } else { z }) * scale) as f32;
+        }
+        if w == 0 || h == 0 {
+            return img;
+        }
+        for _ in 0..4 {
+            let (bx, by) = (rng.random_range(0..w), rng.random_range(0..h));
+            let (bw, bh) = (rng.random_range(1..8), rng.random_range(1..8));
+            for y in by..(by + bh).min(h) {
+                for x in bx..(bx + bw).min(w) {
+                    img[(x, y)] = NAN;
+                }
+            }
+        }
+        for i in 0..(w * h / 40) {
+            let (x, y) = (rng.random_range(0..w), rng.random_range(0..h));
+            img[(x, y)] = match i % 10 {
+                0 => f32::INFINITY,
+                1 => f32::NEG_INFINITY,
+                _ => NAN,
+            };
+        }
+        img
+    }
+
+    #[test]
+    fn fast_paths_match_the_general_path_on_random_images() {
+        let windows = [(5, 5, 5), (3, 3, 3), (7, 7, 5), (5, 3, 1), (9, 9, 3), (3, 5, 7)];
+        for seed in 0..12u64 {
+            let (w, h) = (20 + (seed as u32 * 7) % 45, 16 + (seed as u32 * 11) % 40);
+            let (scale, quantise) = if seed % 3 == 2 { (0.013, false) } else { (1.0, seed % 3 == 0) };
+            let img = random_image(seed, w, h, scale, quantise);
+            let (window_px, deriv_window_px, k_std_window_px) = windows[seed as usize % windows.len()];
+            let p = Params { window_px, deriv_window_px, k_std_window_px };
+            let fast = compute_with(&img, &p, fit::Path::Fast);
+            let unspec = compute_with(&img, &p, fit::Path::Unspecialised);
+            let general = compute_with(&img, &p, fit::Path::General);
+            // The specialised loops do the same arithmetic in the same order as the multi-pass loops.
+            assert_eq!(bits(&fast), bits(&unspec), "seed {seed}: specialised vs multi-pass");
+            compare(&img, &fast, &general, seed);
+        }
+    }
+
+    #[test]
+    fn tiny_and_empty_images_match_the_general_path() {
+        // Images narrower or lower than the windows (no fast pixel at all, or a single fast row/column).
+        for (w, h) in [(0, 0), (0, 3), (1, 1), (2, 7), (7, 2), (5, 5), (6, 9), (9, 5)] {
+            let img = random_image(u64::from(w * 31 + h), w, h, 1.0, true);
+            for p in [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9 }] {
+                let fast = compute(&img, &p);
+                assert_eq!(fast.k.dimensions(), (w, h));
+                compare(&img, &fast, &compute_with(&img, &p, fit::Path::General), u64::from(w * 100 + h));
+            }
+        }
+    }
+
+    /// Checks the fast-path features `f` against the general-path features `g`: same no-data pattern everywhere,
+    /// and values within the f32 rounding bound of the fast path (see the comments).
+    fn compare(img: &RangeImage, f: &SurfaceFeatures, g: &SurfaceFeatures, seed: u64) {
+        let finite: Vec<f64> =
+            img.as_slice().iter().filter(|v| v.is_finite()).map(|&v| f64::from(v)).collect();
+        let range =
+            finite.iter().fold(f64::MIN, |a, &b| a.max(b)) - finite.iter().fold(f64::MAX, |a, &b| a.min(b));
+        // The fast path sums, in f32, differences of depths of one window (each ≤ `range`, so each rounding error
+        // ≤ ε32·range/2), a few dozen terms per moment, then scales by the kernel gain (≤ 1/Σu² etc., small): the
+        // error of a derivative is about one rounding of a depth difference, ≤ ε32·range. Observed: ≤ 0.9·ε32·range
+        // over these images; the tolerance leaves a factor 4.
+        let tol_d = 4.0 * f64::from(f32::EPSILON) * range;
+        let (cx, cy) = ((f64::from(img.width()) - 1.0) / 2.0, (f64::from(img.height()) - 1.0) / 2.0);
+        let mut hmax = 0.0f64;
+        for (x, y, p) in g.plane.enumerate() {
+            let q = f.plane[(x, y)];
+            assert_eq!(
+                p.map(f32::is_nan),
+                q.map(f32::is_nan),
+                "seed {seed}: plane NaN pattern at ({x}, {y})"
+            );
+            let (gd, fd) = (g.gradient[(x, y)], f.gradient[(x, y)]);
+            let (gh, fh) = (g.hessian[(x, y)], f.hessian[(x, y)]);
+            assert_eq!(gd.map(f32::is_nan), fd.map(f32::is_nan), "seed {seed}: gradient NaN pattern");
+            assert_eq!(gh.map(f32::is_nan), fh.map(f32::is_nan), "seed {seed}: hessian NaN pattern");
+            if p[0].is_nan() {
+                continue;
+            }
+            // c = mean − a·x₀ − b·y₀: the slope errors are multiplied by the offset from the image centre, plus
+            // the final f32 rounding of c (both paths round once).
+            let (x0, y0) = (f64::from(x) - cx, f64::from(y) - cy);
+            let tol_c =
+                tol_d * (1.0 + x0.abs() + y0.abs()) + 2.0 * f64::from(p[2].abs()) * f64::from(f32::EPSILON);
+            for i in 0..2 {
+                let e = f64::from((p[i] - q[i]).abs());
+                assert!(e <= tol_d, "seed {seed}: plane[{i}] at ({x}, {y}): {p:?} vs {q:?}");
+            }
+            let e = f64::from((p[2] - q[2]).abs());
+            assert!(e <= tol_c, "seed {seed}: plane c at ({x}, {y}): {p:?} vs {q:?}");
+            if gd[0].is_nan() {
+                continue;
+            }
+            for i in 0..2 {
+                let e = f64::from((gd[i] - fd[i]).abs());
+                assert!(e <= tol_d, "seed {seed}: gradient at ({x}, {y}): {gd:?} vs {fd:?}");
+            }
+            for i in 0..3 {
+                let e = f64::from((gh[i] - fh[i]).abs());
+                assert!(e <= tol_d, "seed {seed}: hessian at ({x}, {y}): {gh:?} vs {fh:?}");
+                hmax = hmax.max(f64::from(gh[i].abs()));
+            }
+        }
+        // The curvatures are smooth functions of the derivatives with slopes ≤ a few times (1 + |hessian|)
+        // (K is a product of second derivatives; H, k1,2 and curvedness are Lipschitz in them); the std of K is
+        // 1-Lipschitz in the K values; plus f32 rounding of the values themselves.
+        let tol_curv = 8.0 * tol_d * (1.0 + hmax);
+        let pairs: [(&Grid<f32>, &Grid<f32>); 4] =
+            [(&g.k, &f.k), (&g.h, &f.h), (&g.curvedness, &f.curvedness), (&g.k_std, &f.k_std)];
+        for (a, b) in pairs {
+            for (i, (&u, &v)) in a.as_slice().iter().zip(b.as_slice()).enumerate() {
+                assert_eq!(u.is_nan(), v.is_nan(), "seed {seed}: curvature NaN pattern at {i}");
+                if !u.is_nan() {
+                    let e = f64::from((u - v).abs());
+                    let tol = tol_curv + 4.0 * f64::from(u.abs()) * f64::from(f32::EPSILON);
+                    assert!(e <= tol, "seed {seed}: curvature {u} vs {v} at {i}");
+                }
+            }
+        }
+        for (a, b) in g.principal.as_slice().iter().zip(f.principal.as_slice()) {
+            for i in 0..2 {
+                assert_eq!(a[i].is_nan(), b[i].is_nan());
+                if !a[i].is_nan() {
+                    let e = f64::from((a[i] - b[i]).abs());
+                    assert!(
+                        e <= tol_curv + 4.0 * f64::from(a[i].abs()) * f64::from(f32::EPSILON),
+                        "seed {seed}: principal"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

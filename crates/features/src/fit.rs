@@ -1,0 +1,620 @@
+//! The per-row fitting engine: local planes and quadratic derivatives, one output row at a time.
+//!
+//! **Fast path** (window entirely inside the image and every pixel of it valid). For a full symmetric window the
+//! least-squares solutions are fixed linear filters: the plane slope is `a = Σu·z / Σu²`, `b = Σv·z / Σv²` and its
+//! mean `Σz / n` (then `c = mean − a·x₀ − b·y₀` with `(x₀, y₀)` the pixel's offset from the image centre); the
+//! quadratic's `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`, `c3 = Σp(u)·z / Σp(u)²` and
+//! `c5 = Σp(v)·z / Σp(v)²` with the centred `p(t) = t² − mean(t²)` (the gains come from faer's pseudo-inverse,
+//! [`SgKernels`]). These moments are separable: a row pass per input row (`Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`)
+//! kept in a ring of `w` rows, then a column pass per output row, plus a column-first pass for the `v` kernels
+//! (`Σv·z`, `Σp(v)·z`, followed by a row box sum). Every kernel is written as a sum of **differences of nearby
+//! depths** (each tap relative to its row's or column's centre pixel), so the f32 arithmetic only rounds quantities
+//! of the size of the local depth variation, never the absolute depth (for integer depths the moments are exact);
+//! all loops run over structure-of-arrays rows and vectorise, and for windows of 3, 5 and 7 pixels they are fused
+//! into three passes per row with the window loop unrolled (same arithmetic in the same order, so bit-identical).
+//! The cost per pixel is O(w) with a small constant (separable filters). A window containing no-data (NaN or ±∞)
+//! makes some moment non-finite, which sends the pixel to the general path: no-data never enters a fast fit.
+//!
+//! **General path** (windows clipped by the border or holding no-data): the plane and the quadratic are fitted to the
+//! window's valid pixels alone (window coordinates, depths relative to the centre pixel, f64). If the window clipped
+//! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
+//! computed once (for `w ≤ 7`) and applied. Otherwise the pixel's own normal equations are solved (the quadratic by
+//! `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (or the valid pixels'
+//! terms, whichever are fewer), exact because its entries are integers.
+
+use crate::plane;
+use crate::quadratic::{SgKernels, basis, cholesky_solve};
+
+/// Streams the fits of one window size over an image, output row by output row (rows in increasing order).
+pub(crate) struct RowFitter<'a> {
+    /// The range image, row-major.
+    src: &'a [f32],
+    /// Image width and height.
+    wu: usize,
+    hu: usize,
+    /// Half window.
+    r: usize,
+    /// The image centre.
+    cx: f64,
+    cy: f64,
+    /// `x − cx` for every column.
+    xoff: Vec<f64>,
+    /// Gains of the fast path: `[c1, c2, c3, c4, c5, 1/n]` per moment.
+    gains: [f32; 6],
+    /// The plane's gains in f64 (`a`, `b`, mean), for `c = mean − a·x₀ − b·y₀`: the moments are exact for integer
+    /// depths, and `c` amplifies the slopes' rounding by the distance to the image centre.
+    plane_gains: [f64; 3],
+    /// `p(k) = k² − mean(t²)` for `k = 0..=r`.
+    p: Vec<f32>,
+    /// The basis `[1, u, v, u², uv, v²]` of each window tap (row-major taps).
+    bas: Vec<[f64; 6]>,
+    /// The lower triangle (row-major) of each tap's outer product `b·bᵀ`; integers.
+    outer: Vec<[f64; 21]>,
+    /// The lower triangle of the full window's normal matrix (sum of `outer`; integers, exact).
+    outer_full: [f64; 21],
+    /// Row-pass ring (`w` rows of `wu − 2r` values): `Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`.
+    ring_h1: Vec<f32>,
+    ring_hp: Vec<f32>,
+    ring_r0: Vec<f32>,
+    /// Next input row to run the row pass on.
+    next_row: usize,
+    /// Column-first pass of the current output row (length `wu`): `Σv·z`, `Σp(v)·z`, `Σ(z − z_centre)`.
+    v1: Vec<f32>,
+    vp: Vec<f32>,
+    c0: Vec<f32>,
+    /// Moments of the current output row (length `wu − 2r`): `[Σz', Σu·z, Σv·z, Σp(u)·z, Σuv·z, Σp(v)·z]`.
+    mom: [Vec<f32>; 6],
+    /// Check value of the current output row (sum of the moments; non-finite where the window held no data).
+    chk: Vec<f32>,
+    /// Which code computes the full windows.
+    path: Path,
+    /// Kernels of the clipped-window rectangles met so far, indexed by the rectangle (empty until first needed).
+    shapes: Vec<Option<ShapeKernel>>,
+}
+
+/// Which code fits the full windows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Path {
+    /// Fused loops specialised for windows of 3, 5 and 7 pixels, the multi-pass loops otherwise.
+    Fast,
+    /// The multi-pass loops for every window size (bit-identical to `Fast`; the tests compare them).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Unspecialised,
+    /// The general (partial-window) path for every pixel (the tests compare it with the fast paths).
+    #[cfg_attr(not(test), allow(dead_code))]
+    General,
+}
+
+/// The result of one pixel's fit.
+struct PixelFit {
+    /// `[a, b, c]` of the plane (c at the image centre), or NaN.
+    plane: [f32; 3],
+    /// `[Ix, Iy]`, or NaN.
+    grad: [f32; 2],
+    /// `[Ixx, Ixy, Iyy]`, or NaN.
+    hess: [f32; 3],
+}
+
+const NAN_FIT: PixelFit = PixelFit { plane: [f32::NAN; 3], grad: [f32::NAN; 2], hess: [f32::NAN; 3] };
+
+impl<'a> RowFitter<'a> {
+    /// Prepares the fits of `window_px × window_px` windows over `src` (`wu × hu`, row-major).
+    pub(crate) fn new(src: &'a [f32], wu: usize, hu: usize, window_px: u32, path: Path) -> Self {
+        assert_eq!(src.len(), wu * hu, "image size");
+        let k = SgKernels::new(window_px);
+        let r = window_px as usize / 2;
+        let win = 2 * r + 1;
+        let idx = |u: usize, v: usize| (v + r) * win + (u + r);
+        // Gains of the full-window kernels, read off faer's pseudo-inverse:
+        // kernel of c1 at (1, 0) is 1/Σu²; of c2 at (0, 1) is 1/Σv²; of c4 at (1, 1) is 1/Σu²v²;
+        // kernel of c3 is g3·p(u), and p(1) − p(0) = 1, so g3 = K3(1, 0) − K3(0, 0); likewise c5.
+        let pv = &k.pinv;
+        let gains = [
+            pv[idx(1, 0)][1] as f32,
+            pv[idx(0, 1)][2] as f32,
+            (pv[idx(1, 0)][3] - pv[idx(0, 0)][3]) as f32,
+            pv[idx(1, 1)][4] as f32,
+            (pv[idx(0, 1)][5] - pv[idx(0, 0)][5]) as f32,
+            1.0 / (win * win) as f32,
+        ];
+        let plane_gains = [pv[idx(1, 0)][1], pv[idx(0, 1)][2], 1.0 / (win * win) as f64];
+        let mean_t2 = (r * (r + 1)) as f64 / 3.0;
+        let p = (0..=r).map(|t| ((t * t) as f64 - mean_t2) as f32).collect();
+        let bas: Vec<[f64; 6]> =
+            (0..win * win).map(|t| basis((t % win) as f64 - r as f64, (t / win) as f64 - r as f64)).collect();
+        let outer: Vec<[f64; 21]> = bas
+            .iter()
+            .map(|b| {
+                let mut o = [0.0; 21];
+                let mut t = 0;
+                for i in 0..6 {
+                    for j in 0..=i {
+                        o[t] = b[i] * b[j];
+                        t += 1;
+                    }
+                }
+                o
+            })
+            .collect();
+        let mut outer_full = [0.0; 21];
+        for o in &outer {
+            for i in 0..21 {
+                outer_full[i] += o[i];
+            }
+        }
+        let m = wu.saturating_sub(2 * r);
+        Self {
+            src,
+            wu,
+            hu,
+            r,
+            cx: (wu as f64 - 1.0) / 2.0,
+            cy: (hu as f64 - 1.0) / 2.0,
+            xoff: (0..wu).map(|x| x as f64 - (wu as f64 - 1.0) / 2.0).collect(),
+            gains,
+            plane_gains,
+            p,
+            bas,
+            outer,
+            outer_full,
+            ring_h1: vec![0.0; win * m],
+            ring_hp: vec![0.0; win * m],
+            ring_r0: vec![0.0; win * m],
+            next_row: 0,
+            v1: vec![0.0; wu],
+            vp: vec![0.0; wu],
+            c0: vec![0.0; wu],
+            mom: std::array::from_fn(|_| vec![0.0; m]),
+            chk: vec![0.0; m],
+            path,
+            shapes: Vec::new(),
+        }
+    }
+
+    /// Runs the row pass of input row `yy` into its ring slot.
+    fn row_pass(&mut self, yy: usize) {
+        let (wu, r) = (self.wu, self.r);
+        let m = wu - 2 * r;
+        let slot = (yy % (2 * r + 1)) * m;
+        let z = &self.src[yy * wu..(yy + 1) * wu];
+        let h1 = &mut self.ring_h1[slot..slot + m];
+        let hp = &mut self.ring_hp[slot..slot + m];
+        let r0 = &mut self.ring_r0[slot..slot + m];
+        h1.fill(0.0);
+        hp.fill(0.0);
+        r0.fill(0.0);
+        let zc = &z[r..r + m];
+        for k in 1..=r {
+            let (zp, zm) = (&z[r + k..r + k + m], &z[r - k..r - k + m]);
+            let (kf, pk) = (k as f32, self.p[k]);
+            for i in 0..m {
+                let (a, b, c) = (zp[i], zm[i], zc[i]);
+                h1[i] += kf * (a - b);
+                let e = (a - c) + (b - c);
+                hp[i] += pk * e;
+                r0[i] += e;
+            }
+        }
+    }
+
+    /// Computes the fast-path moments of output row `y` (`r ≤ y < hu − r`, `wu > 2r`) into `self.mom`.
+    fn moments(&mut self, y: usize) {
+        let (wu, r) = (self.wu, self.r);
+        let win = 2 * r + 1;
+        let m = wu - 2 * r;
+        let slot = |yy: usize| (yy % win) * m;
+        let [m00, m10, m01, m20, m11, m02] = &mut self.mom;
+        // Column sums of the row passes.
+        let sc = slot(y);
+        m10.copy_from_slice(&self.ring_h1[sc..sc + m]);
+        m20.copy_from_slice(&self.ring_hp[sc..sc + m]);
+        m00.copy_from_slice(&self.ring_r0[sc..sc + m]);
+        m11.fill(0.0);
+        for k in 1..=r {
+            let (sp, sm) = (slot(y + k), slot(y - k));
+            let kf = k as f32;
+            let (h1p, h1m) = (&self.ring_h1[sp..sp + m], &self.ring_h1[sm..sm + m]);
+            let (hpp, hpm) = (&self.ring_hp[sp..sp + m], &self.ring_hp[sm..sm + m]);
+            let (r0p, r0m) = (&self.ring_r0[sp..sp + m], &self.ring_r0[sm..sm + m]);
+            for i in 0..m {
+                m10[i] += h1p[i] + h1m[i];
+                m11[i] += kf * (h1p[i] - h1m[i]);
+                m20[i] += hpp[i] + hpm[i];
+                m00[i] += r0p[i] + r0m[i];
+            }
+        }
+        // Column-first pass for the v kernels, over the whole row.
+        let src = self.src;
+        let zc = &src[y * wu..(y + 1) * wu];
+        let (v1, vp, c0) = (&mut self.v1, &mut self.vp, &mut self.c0);
+        v1.fill(0.0);
+        vp.fill(0.0);
+        c0.fill(0.0);
+        for k in 1..=r {
+            let zp = &src[(y + k) * wu..(y + k + 1) * wu];
+            let zm = &src[(y - k) * wu..(y - k + 1) * wu];
+            let (kf, pk) = (k as f32, self.p[k]);
+            for i in 0..wu {
+                let (a, b, c) = (zp[i], zm[i], zc[i]);
+                v1[i] += kf * (a - b);
+                let e = (a - c) + (b - c);
+                vp[i] += pk * e;
+                c0[i] += e;
+            }
+        }
+        // Row box sums of the column-first pass; the centre column's Σ(z − z_centre) counts once per column.
+        m01.copy_from_slice(&v1[..m]);
+        m02.copy_from_slice(&vp[..m]);
+        for j in 1..win {
+            let (a, b) = (&v1[j..j + m], &vp[j..j + m]);
+            for i in 0..m {
+                m01[i] += a[i];
+                m02[i] += b[i];
+            }
+        }
+        let wf = win as f32;
+        for (o, &c) in m00.iter_mut().zip(&c0[r..r + m]) {
+            *o += wf * c;
+        }
+    }
+
+    /// Fits output row `y` (rows must come in increasing order) into the three row slices (length `wu`).
+    pub(crate) fn row(
+        &mut self,
+        y: usize,
+        plane: &mut [[f32; 3]],
+        grad: &mut [[f32; 2]],
+        hess: &mut [[f32; 3]],
+    ) {
+        let (wu, hu, r) = (self.wu, self.hu, self.r);
+        assert!(plane.len() == wu && grad.len() == wu && hess.len() == wu, "row length");
+        let fast_row = self.path != Path::General && wu > 2 * r && y >= r && y + r < hu;
+        let (mut fast_lo, mut fast_hi) = (0, 0);
+        if fast_row {
+            (fast_lo, fast_hi) = (r, wu - r);
+            let (p, g, h) = (&mut plane[r..wu - r], &mut grad[r..wu - r], &mut hess[r..wu - r]);
+            match (self.path, r) {
+                (Path::Fast, 1) => self.fused::<1, 3>(y, p, g, h),
+                (Path::Fast, 2) => self.fused::<2, 5>(y, p, g, h),
+                (Path::Fast, 3) => self.fused::<3, 7>(y, p, g, h),
+                _ => {
+                    while self.next_row <= y + r {
+                        self.row_pass(self.next_row);
+                        self.next_row += 1;
+                    }
+                    self.moments(y);
+                    self.fast_row(y, p, g, h);
+                }
+            }
+        }
+        for x in (0..fast_lo).chain(fast_hi..wu) {
+            (plane[x], grad[x], hess[x]) = self.general(x, y);
+        }
+        // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
+        let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
+        if fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
+            for x in fast_lo..fast_hi {
+                if !self.chk[x - r].is_finite() {
+                    (plane[x], grad[x], hess[x]) = self.general(x, y);
+                }
+            }
+        }
+    }
+
+    /// Writes the fast-path fits of output row `y` from the moments (slices of length `wu − 2r`, x = r ..); the
+    /// check value `chk` (sum of the moments) is non-finite where the window held no data.
+    fn fast_row(&mut self, y: usize, plane: &mut [[f32; 3]], grad: &mut [[f32; 2]], hess: &mut [[f32; 3]]) {
+        let (wu, r) = (self.wu, self.r);
+        let m = wu - 2 * r;
+        let (g, gd) = (self.gains, self.plane_gains);
+        let y0 = y as f64 - self.cy;
+        let xoff = &self.xoff[r..r + m];
+        let zc = &self.src[y * wu + r..y * wu + r + m];
+        let [m00, m10, m01, m20, m11, m02] = &self.mom;
+        let (m00, m10, m01, m20, m11, m02) =
+            (&m00[..m], &m10[..m], &m01[..m], &m20[..m], &m11[..m], &m02[..m]);
+        let chk = &mut self.chk[..m];
+        let (plane, grad, hess) = (&mut plane[..m], &mut grad[..m], &mut hess[..m]);
+        for i in 0..m {
+            let (c1, c2) = (g[0] * m10[i], g[1] * m01[i]);
+            let (c3, c4, c5) = (g[2] * m20[i], g[3] * m11[i], g[4] * m02[i]);
+            let c = f64::from(zc[i]) + gd[2] * f64::from(m00[i])
+                - gd[0] * f64::from(m10[i]) * xoff[i]
+                - gd[1] * f64::from(m01[i]) * y0;
+            plane[i] = [c1, c2, c as f32];
+            grad[i] = [c1, c2];
+            hess[i] = [2.0 * c3, c4, 2.0 * c5];
+            chk[i] = m00[i] + m10[i] + m01[i] + m20[i] + m11[i] + m02[i];
+        }
+    }
+
+    /// The fast path of output row `y` for a window of `2R + 1 = W` pixels: the same arithmetic, in the same order,
+    /// as `row_pass` + `moments` + `fast_row`, but fused into three loops whose inner loops over the window are
+    /// unrolled (bit-identical results, far fewer memory passes).
+    fn fused<const R: usize, const W: usize>(
+        &mut self,
+        y: usize,
+        plane: &mut [[f32; 3]],
+        grad: &mut [[f32; 2]],
+        hess: &mut [[f32; 3]],
+    ) {
+        let wu = self.wu;
+        let m = wu - 2 * R;
+        let src = self.src;
+        let mut pk = [0.0f32; W];
+        pk[..=R].copy_from_slice(&self.p);
+        // Row passes of the rows entering the window.
+        while self.next_row <= y + R {
+            let yy = self.next_row;
+            let slot = (yy % W) * m;
+            let z = &src[yy * wu..(yy + 1) * wu];
+            let h1 = &mut self.ring_h1[slot..slot + m];
+            let hp = &mut self.ring_hp[slot..slot + m];
+            let r0 = &mut self.ring_r0[slot..slot + m];
+            let zs: [&[f32]; W] = std::array::from_fn(|j| &z[j..j + m]);
+            for i in 0..m {
+                let c = zs[R][i];
+                let (mut a1, mut ap, mut a0) = (0.0f32, 0.0f32, 0.0f32);
+                for k in 1..=R {
+                    let (a, b) = (zs[R + k][i], zs[R - k][i]);
+                    a1 += k as f32 * (a - b);
+                    let e = (a - c) + (b - c);
+                    ap += pk[k] * e;
+                    a0 += e;
+                }
+                h1[i] = a1;
+                hp[i] = ap;
+                r0[i] = a0;
+            }
+            self.next_row += 1;
+        }
+        // Column-first pass over the whole row.
+        let rows: [&[f32]; W] = std::array::from_fn(|j| &src[(y + j - R) * wu..(y + j - R + 1) * wu]);
+        let (v1, vp, c0) = (&mut self.v1[..wu], &mut self.vp[..wu], &mut self.c0[..wu]);
+        for i in 0..wu {
+            let c = rows[R][i];
+            let (mut a1, mut ap, mut a0) = (0.0f32, 0.0f32, 0.0f32);
+            for k in 1..=R {
+                let (a, b) = (rows[R + k][i], rows[R - k][i]);
+                a1 += k as f32 * (a - b);
+                let e = (a - c) + (b - c);
+                ap += pk[k] * e;
+                a0 += e;
+            }
+            v1[i] = a1;
+            vp[i] = ap;
+            c0[i] = a0;
+        }
+        // Column sums of the row passes, row box sums of the column-first pass, and the fits.
+        let slot = |v: usize| ((y + v - R) % W) * m;
+        let h1s: [&[f32]; W] = std::array::from_fn(|v| &self.ring_h1[slot(v)..slot(v) + m]);
+        let hps: [&[f32]; W] = std::array::from_fn(|v| &self.ring_hp[slot(v)..slot(v) + m]);
+        let r0s: [&[f32]; W] = std::array::from_fn(|v| &self.ring_r0[slot(v)..slot(v) + m]);
+        let (g, gd) = (self.gains, self.plane_gains);
+        let y0 = y as f64 - self.cy;
+        let xoff = &self.xoff[R..R + m];
+        let zc = &src[y * wu + R..y * wu + R + m];
+        let (v1, vp, c0) = (&self.v1[..wu], &self.vp[..wu], &self.c0[..wu]);
+        let chk = &mut self.chk[..m];
+        let (plane, grad, hess) = (&mut plane[..m], &mut grad[..m], &mut hess[..m]);
+        let wf = W as f32;
+        for i in 0..m {
+            let (mut m10, mut m20, mut m00, mut m11) = (h1s[R][i], hps[R][i], r0s[R][i], 0.0f32);
+            for k in 1..=R {
+                let (h1p, h1m) = (h1s[R + k][i], h1s[R - k][i]);
+                m10 += h1p + h1m;
+                m11 += k as f32 * (h1p - h1m);
+                m20 += hps[R + k][i] + hps[R - k][i];
+                m00 += r0s[R + k][i] + r0s[R - k][i];
+            }
+            let (vv1, vvp) = (&v1[i..i + W], &vp[i..i + W]);
+            let (mut m01, mut m02) = (vv1[0], vvp[0]);
+            for j in 1..W {
+                m01 += vv1[j];
+                m02 += vvp[j];
+            }
+            m00 += wf * c0[i + R];
+            let (c1, c2) = (g[0] * m10, g[1] * m01);
+            let (c3, c4, c5) = (g[2] * m20, g[3] * m11, g[4] * m02);
+            let c = f64::from(zc[i]) + gd[2] * f64::from(m00)
+                - gd[0] * f64::from(m10) * xoff[i]
+                - gd[1] * f64::from(m01) * y0;
+            plane[i] = [c1, c2, c as f32];
+            grad[i] = [c1, c2];
+            hess[i] = [2.0 * c3, c4, 2.0 * c5];
+            chk[i] = m00 + m10 + m01 + m20 + m11 + m02;
+        }
+    }
+
+    /// Fits the plane and the quadratic to the valid pixels of the window around `(x, y)`.
+    fn general(&mut self, x: usize, y: usize) -> ([f32; 3], [f32; 2], [f32; 3]) {
+        let f = self.general_fit(x, y);
+        (f.plane, f.grad, f.hess)
+    }
+
+    /// [`Self::general`] as a [`PixelFit`].
+    fn general_fit(&mut self, x: usize, y: usize) -> PixelFit {
+        let (wu, hu, r) = (self.wu, self.hu, self.r as i64);
+        let zc = self.src[y * wu + x];
+        if !zc.is_finite() {
+            return NAN_FIT;
+        }
+        let zc = f64::from(zc);
+        let win = 2 * r + 1;
+        let (xi, yi) = (x as i64, y as i64);
+        // The window clipped to the image.
+        let (ulo, uhi) = ((-xi).max(-r), (wu as i64 - 1 - xi).min(r));
+        let (vlo, vhi) = ((-yi).max(-r), (hu as i64 - 1 - yi).min(r));
+        if r <= MAX_SHAPE_R
+            && let Some(f) = self.shape_fit(x, y, zc, [ulo, uhi, vlo, vhi])
+        {
+            return f;
+        }
+        let tap = |du: i64, dv: i64| ((dv + r) * win + du + r) as usize;
+        let at = |du: i64, dv: i64| self.src[(yi + dv) as usize * wu + (xi + du) as usize];
+        let mut rhs = [0.0f64; 6];
+        let mut count = 0;
+        for dv in vlo..=vhi {
+            for du in ulo..=uhi {
+                let z = at(du, dv);
+                if z.is_finite() {
+                    count += 1;
+                    let b = &self.bas[tap(du, dv)];
+                    let z = f64::from(z) - zc;
+                    for i in 0..6 {
+                        rhs[i] += b[i] * z;
+                    }
+                }
+            }
+        }
+        // Normal matrix of the valid pixels: their outer products, or the full window's minus the missing ones',
+        // whichever has fewer terms. The entries are integers, so both are exact and equal.
+        let mut packed = [0.0f64; 21];
+        if 2 * count <= (win * win) as usize {
+            for dv in vlo..=vhi {
+                for du in ulo..=uhi {
+                    if at(du, dv).is_finite() {
+                        let o = &self.outer[tap(du, dv)];
+                        for i in 0..21 {
+                            packed[i] += o[i];
+                        }
+                    }
+                }
+            }
+        } else {
+            let mut miss = [0.0f64; 21];
+            for dv in -r..=r {
+                for du in -r..=r {
+                    let inside = (ulo..=uhi).contains(&du) && (vlo..=vhi).contains(&dv);
+                    if !inside || !at(du, dv).is_finite() {
+                        let o = &self.outer[tap(du, dv)];
+                        for i in 0..21 {
+                            miss[i] += o[i];
+                        }
+                    }
+                }
+            }
+            let full = &self.outer_full;
+            for i in 0..21 {
+                packed[i] = full[i] - miss[i];
+            }
+        }
+        let mut n = [[0.0f64; 6]; 6];
+        let mut t = 0;
+        for i in 0..6 {
+            for j in 0..=i {
+                n[i][j] = packed[t];
+                t += 1;
+            }
+        }
+        let sums = [n[0][0], n[1][0], n[2][0], n[1][1], n[2][1], n[2][2], rhs[0], rhs[1], rhs[2]];
+        let plane = plane::solve(&sums);
+        let quad = (count >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs);
+        self.pixel_fit(x, y, zc, plane, quad)
+    }
+
+    /// The outputs of a fit in window coordinates with depths relative to `zc`.
+    fn pixel_fit(
+        &self,
+        x: usize,
+        y: usize,
+        zc: f64,
+        plane: Option<[f64; 3]>,
+        quad: Option<[f64; 6]>,
+    ) -> PixelFit {
+        let mut out = NAN_FIT;
+        if let Some([a, b, c]) = plane {
+            let (x0, y0) = (x as f64 - self.cx, y as f64 - self.cy);
+            out.plane = [a as f32, b as f32, (zc + c - a * x0 - b * y0) as f32];
+        }
+        if let Some(q) = quad {
+            out.grad = [q[1] as f32, q[2] as f32];
+            out.hess = [(2.0 * q[3]) as f32, q[4] as f32, (2.0 * q[5]) as f32];
+        }
+        out
+    }
+
+    /// The fit of a pixel whose window, clipped to the image to the rectangle `[ulo, uhi] × [vlo, vhi]` of window
+    /// offsets, holds no no-data: the least-squares kernels of that rectangle (computed once per rectangle) applied
+    /// to the depths. `None` if the rectangle holds no-data.
+    fn shape_fit(&mut self, x: usize, y: usize, zc: f64, [ulo, uhi, vlo, vhi]: [i64; 4]) -> Option<PixelFit> {
+        let (r, wu) = (self.r as i64, self.wu);
+        let s = (r + 1) as usize;
+        let key = (((ulo + r) as usize * s + uhi as usize) * s + (vlo + r) as usize) * s + vhi as usize;
+        if self.shapes.is_empty() {
+            self.shapes = vec![None; s * s * s * s];
+        }
+        let kernel = self.shapes[key].get_or_insert_with(|| ShapeKernel::new([ulo, uhi, vlo, vhi]));
+        let (mut p, mut q) = ([0.0f64; 3], [0.0f64; 6]);
+        let mut t = 0;
+        for dv in vlo..=vhi {
+            let row = &self.src[(y as i64 + dv) as usize * wu..];
+            for du in ulo..=uhi {
+                let z = row[(x as i64 + du) as usize];
+                if !z.is_finite() {
+                    return None;
+                }
+                let z = f64::from(z) - zc;
+                let (kp, kq) = (&kernel.plane[t], &kernel.quad[t]);
+                for i in 0..3 {
+                    p[i] += kp[i] * z;
+                }
+                for i in 0..6 {
+                    q[i] += kq[i] * z;
+                }
+                t += 1;
+            }
+        }
+        let (has_plane, has_quad) = (kernel.has_plane, kernel.has_quad);
+        Some(self.pixel_fit(x, y, zc, has_plane.then_some(p), has_quad.then_some(q)))
+    }
+}
+
+/// Largest half window whose clipped-rectangle kernels are cached ((r + 1)⁴ rectangles).
+const MAX_SHAPE_R: i64 = 3;
+
+/// The least-squares kernels of one rectangle of window offsets (taps in row-major order).
+#[derive(Debug, Clone)]
+struct ShapeKernel {
+    /// Per tap, the weights of the plane's `[a, b, c]` (window coordinates, depths relative to the centre).
+    plane: Vec<[f64; 3]>,
+    /// Per tap, the weights of the quadratic's `c0..c5`.
+    quad: Vec<[f64; 6]>,
+    /// Whether the rectangle determines a plane / a quadratic (same criteria as the general path).
+    has_plane: bool,
+    has_quad: bool,
+}
+
+impl ShapeKernel {
+    /// The kernels of the rectangle `[ulo, uhi] × [vlo, vhi]`: the general path's solvers applied to unit depths.
+    fn new([ulo, uhi, vlo, vhi]: [i64; 4]) -> Self {
+        let taps: Vec<[f64; 6]> =
+            (vlo..=vhi).flat_map(|v| (ulo..=uhi).map(move |u| basis(u as f64, v as f64))).collect();
+        let mut n = [[0.0f64; 6]; 6];
+        for b in &taps {
+            for i in 0..6 {
+                for j in 0..=i {
+                    n[i][j] += b[i] * b[j];
+                }
+            }
+        }
+        let sums = |b: &[f64; 6]| [n[0][0], n[1][0], n[2][0], n[1][1], n[2][1], n[2][2], b[0], b[1], b[2]];
+        // The plane's solution is linear in (Σz, Σuz, Σvz): the kernel of a tap is the solution for a unit depth there.
+        let plane: Vec<Option<[f64; 3]>> = taps.iter().map(|b| plane::solve(&sums(b))).collect();
+        let quad: Vec<Option<[f64; 6]>> = taps
+            .iter()
+            .map(|b| {
+                let (mut n, mut rhs) = (n, *b);
+                (taps.len() >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs)
+            })
+            .collect();
+        let has_plane = plane.iter().all(Option::is_some);
+        let has_quad = quad.iter().all(Option::is_some);
+        Self {
+            plane: plane.into_iter().map(|p| p.unwrap_or([0.0; 3])).collect(),
+            quad: quad.into_iter().map(|q| q.unwrap_or([0.0; 6])).collect(),
+            has_plane,
+            has_quad,
+        }
+    }
+}
