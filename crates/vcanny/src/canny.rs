@@ -2,9 +2,11 @@
 
 use crate::{ThresholdMode, Thresholds};
 
-/// Keeps the pixels whose magnitude is a maximum along the gradient direction, interpolating the two neighbours
-/// on the 3×3 ring linearly. Ties keep the pixel on the negative side of the (canonically oriented) direction, so
-/// a symmetric two-pixel ridge gives a one-pixel edge.
+/// Keeps the pixels whose magnitude is a maximum along the gradient direction (see
+/// [`crate::gradient::nms_row`]); pixels that are not `ok` are never kept and count as magnitude 0 for their
+/// neighbours, as does the outside of the image. (The detector runs `nms_row` inside its row pipeline; this
+/// whole-image form serves the tests.)
+#[cfg(test)]
 pub(crate) fn non_max_suppression(
     mag: &[f32],
     dir: &[[f32; 2]],
@@ -12,99 +14,208 @@ pub(crate) fn non_max_suppression(
     w: usize,
     h: usize,
 ) -> Vec<bool> {
-    let at = |x: isize, y: isize| -> f32 {
-        if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
-            return 0.0;
-        }
-        let j = y as usize * w + x as usize;
-        if ok[j] { mag[j] } else { 0.0 }
-    };
-    let mut keep = vec![false; w * h];
+    // Magnitudes padded with a zero border, 0 where not ok.
+    let wp = w + 2;
+    let mut padded = vec![0.0f32; wp * (h + 2)];
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
-            let m = mag[i];
-            if !ok[i] || m <= 0.0 {
-                continue;
-            }
-            let [dx, dy] = dir[i];
-            let (xi, yi) = (x as isize, y as isize);
-            // Sample the ring at ±d scaled so that max(|dx|, |dy|) = 1.
-            let sample = |s: isize| -> f32 {
-                if dx.abs() >= dy.abs() {
-                    let sx = if dx >= 0.0 { s } else { -s };
-                    let t = dy / dx.abs() * s as f32;
-                    let sy = if t >= 0.0 { 1 } else { -1 };
-                    let f = t.abs();
-                    (1.0 - f) * at(xi + sx, yi) + f * at(xi + sx, yi + sy)
-                } else {
-                    let sy = if dy >= 0.0 { s } else { -s };
-                    let t = dx / dy.abs() * s as f32;
-                    let sx = if t >= 0.0 { 1 } else { -1 };
-                    let f = t.abs();
-                    (1.0 - f) * at(xi, yi + sy) + f * at(xi + sx, yi + sy)
-                }
-            };
-            let (fwd, bwd) = (sample(1), sample(-1));
-            keep[i] = m >= fwd && m > bwd;
+            padded[(y + 1) * wp + x + 1] = if ok[i] { mag[i] } else { 0.0 };
         }
     }
-    keep
+    let mut keep = vec![0u8; w * h];
+    for y in 0..h {
+        let row = |yy: usize| &padded[yy * wp..(yy + 1) * wp];
+        let dx: Vec<f32> = dir[y * w..(y + 1) * w].iter().map(|d| d[0]).collect();
+        let dy: Vec<f32> = dir[y * w..(y + 1) * w].iter().map(|d| d[1]).collect();
+        crate::gradient::nms_row([row(y), row(y + 1), row(y + 2)], &dx, &dy, &mut keep[y * w..(y + 1) * w]);
+    }
+    keep.into_iter().map(|k| k == 1).collect()
 }
 
 /// The `(low, high)` absolute thresholds for `mag` over the `ok` pixels.
+#[cfg(test)]
 pub(crate) fn absolute_thresholds(t: &Thresholds, mag: &[f32], ok: &[bool]) -> (f32, f32) {
+    thresholds(t, mag, ok, None)
+}
+
+/// The `(low, high)` absolute thresholds for `mag` over the `ok` pixels, given their [`Histogram`] if already made.
+pub(crate) fn thresholds(t: &Thresholds, mag: &[f32], ok: &[bool], hist: Option<&Histogram>) -> (f32, f32) {
+    let quantiles = |qs: &[f32]| match hist {
+        Some(hs) => hs.quantiles(mag, ok, qs),
+        None => {
+            let mut hs = Histogram::new();
+            hs.add_row(mag, ok);
+            hs.quantiles(mag, ok, qs)
+        }
+    };
     match t.mode {
         ThresholdMode::Absolute => (t.low, t.high),
         ThresholdMode::Quantile => {
-            let mut v: Vec<f32> = mag.iter().zip(ok).filter(|&(_, &o)| o).map(|(&m, _)| m).collect();
-            (quantile(&mut v, t.low), quantile(&mut v, t.high))
+            let v = quantiles(&[t.low, t.high]);
+            (v[0], v[1])
         }
         ThresholdMode::NoiseRelative => {
-            let mut v: Vec<f32> = mag.iter().zip(ok).filter(|&(_, &o)| o).map(|(&m, _)| m).collect();
-            let noise = quantile(&mut v, 0.5).max(t.noise_floor);
+            let noise = quantiles(&[0.5])[0].max(t.noise_floor);
             (t.low * noise, t.high * noise)
         }
     }
 }
 
+/// The rank of the `q`-quantile (nearest rank) among `n > 0` values.
+fn quantile_rank(n: usize, q: f32) -> usize {
+    ((q.clamp(0.0, 1.0) * (n - 1) as f32).round() as usize).min(n - 1)
+}
+
 /// The `q`-quantile (nearest rank) of `v`; `+inf` for an empty slice so nothing passes.
+#[cfg(test)]
 pub(crate) fn quantile(v: &mut [f32], q: f32) -> f32 {
     if v.is_empty() {
         return f32::INFINITY;
     }
-    let k = ((q.clamp(0.0, 1.0) * (v.len() - 1) as f32).round() as usize).min(v.len() - 1);
+    let k = quantile_rank(v.len(), q);
     let (_, x, _) = v.select_nth_unstable_by(k, f32::total_cmp);
     *x
 }
 
+/// A `u32` whose unsigned order is [`f32::total_cmp`]'s order.
+fn order_key(v: f32) -> u32 {
+    let b = v.to_bits();
+    // Negative: all bits flipped; positive: the sign bit set (branch-free, so loops over it vectorise).
+    b ^ ((((b as i32) >> 31) as u32) | 0x8000_0000)
+}
+
+/// The inverse of [`order_key`].
+fn from_order_key(k: u32) -> f32 {
+    f32::from_bits(if k >> 31 == 1 { k & 0x7fff_ffff } else { !k })
+}
+
+/// The `qs`-quantiles (nearest rank, as [`quantile`]) of `mag` over the `ok` pixels, `+inf` if there are none.
+#[cfg(test)]
+pub(crate) fn masked_quantiles(mag: &[f32], ok: &[bool], qs: &[f32]) -> Vec<f32> {
+    let mut hs = Histogram::new();
+    hs.add_row(mag, ok);
+    hs.quantiles(mag, ok, qs)
+}
+
+/// Counts of values by the top 16 bits of their [`order_key`], for a radix select of quantiles.
+pub(crate) struct Histogram {
+    counts: Vec<u32>,
+    n: usize,
+}
+
+impl Histogram {
+    /// An empty histogram.
+    pub(crate) fn new() -> Self {
+        Self { counts: vec![0; 1 << 16], n: 0 }
+    }
+
+    /// Counts the values of `mag` where `ok` (a row while it is in cache, or the whole image).
+    pub(crate) fn add_row(&mut self, mag: &[f32], ok: &[bool]) {
+        for (&m, &o) in mag.iter().zip(ok) {
+            self.counts[(order_key(m) >> 16) as usize] += u32::from(o);
+            self.n += usize::from(o);
+        }
+    }
+
+    /// The count of bucket `b`.
+    fn count(&self, b: usize) -> usize {
+        self.counts[b] as usize
+    }
+
+    /// The `qs`-quantiles (nearest rank, as [`quantile`]) of `mag` over the `ok` pixels, the values this
+    /// histogram counted; `+inf` if there are none. Radix select: the bucket of the top 16 key bits holding the
+    /// rank, then the low 16 bits by counting the keys of that bucket.
+    pub(crate) fn quantiles(&self, mag: &[f32], ok: &[bool], qs: &[f32]) -> Vec<f32> {
+        if self.n == 0 {
+            return vec![f32::INFINITY; qs.len()];
+        }
+        let mut low = vec![0u32; 1 << 16];
+        const CHUNK: usize = 1024;
+        qs.iter()
+            .map(|&q| {
+                let mut k = quantile_rank(self.n, q);
+                let mut bucket = 0;
+                while k >= self.count(bucket) {
+                    k -= self.count(bucket);
+                    bucket += 1;
+                }
+                // The rank among the low 16 bits of the keys in that bucket, by a second histogram (branch-free:
+                // every pixel adds 0 or 1).
+                // The bucket's keys are first compacted branch-free (every key written, the cursor advanced past
+                // the ones in the bucket), so the other pixels cost no scattered increment.
+                let bucket = bucket as u32;
+                low.fill(0);
+                let mut buf = [0u16; CHUNK];
+                for (ms, os) in mag.chunks(CHUNK).zip(ok.chunks(CHUNK)) {
+                    let mut j = 0;
+                    for (&m, &o) in ms.iter().zip(os) {
+                        let key = order_key(m);
+                        buf[j] = key as u16;
+                        j += usize::from(o & (key >> 16 == bucket));
+                    }
+                    for &s in &buf[..j] {
+                        low[s as usize] += 1;
+                    }
+                }
+                let mut lo = 0;
+                while k >= low[lo] as usize {
+                    k -= low[lo] as usize;
+                    lo += 1;
+                }
+                from_order_key(bucket << 16 | lo as u32)
+            })
+            .collect()
+    }
+}
+
 /// Hysteresis: the candidates with magnitude ≥ `low` that are 8-connected through such candidates to one with
 /// magnitude ≥ `high`. A flood fill from the strong pixels, so the result does not depend on the scan order.
+#[cfg(test)]
 pub(crate) fn hysteresis(mag: &[f32], cand: &[bool], w: usize, h: usize, low: f32, high: f32) -> Vec<bool> {
-    let weak = |i: usize| cand[i] && mag[i] >= low;
-    let mut out = vec![false; w * h];
-    let mut stack = Vec::new();
-    for i in 0..w * h {
-        if cand[i] && mag[i] >= high && mag[i] >= low && !out[i] {
-            out[i] = true;
-            stack.push(i);
-            while let Some(j) = stack.pop() {
-                let (x, y) = ((j % w) as isize, (j / w) as isize);
-                for dy in -1..=1isize {
-                    for dx in -1..=1isize {
-                        let (xx, yy) = (x + dx, y + dy);
-                        if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
-                            continue;
-                        }
-                        let k = yy as usize * w + xx as usize;
-                        if !out[k] && weak(k) {
-                            out[k] = true;
-                            stack.push(k);
+    let mut state: Vec<u8> = cand.iter().map(|&c| u8::from(c)).collect();
+    hysteresis_in_place(mag, &mut state, w, h, low, high)
+}
+
+/// [`hysteresis`] on candidates given as `state` (0 or 1 per pixel), used as the flood's scratch.
+pub(crate) fn hysteresis_in_place(
+    mag: &[f32],
+    state: &mut [u8],
+    w: usize,
+    h: usize,
+    low: f32,
+    high: f32,
+) -> Vec<bool> {
+    // Bit 0 = weak (candidate ≥ low), bit 1 = also strong (≥ high); 4 = edge (visited).
+    for (s, &m) in state.iter_mut().zip(mag) {
+        let weak = *s & u8::from(m >= low);
+        *s = weak | (weak & u8::from(m >= high)) << 1;
+    }
+    const STRONG: u64 = u64::from_le_bytes([2; 8]);
+    let mut stack: Vec<(usize, usize)> = Vec::new();
+    let mut i = 0;
+    while i < w * h {
+        // Skip 8 pixels at a time while none is strong.
+        if i + 8 <= w * h && u64::from_le_bytes(state[i..i + 8].try_into().expect("8 bytes")) & STRONG == 0 {
+            i += 8;
+            continue;
+        }
+        if state[i] & 2 != 0 {
+            state[i] = 4;
+            stack.push((i % w, i / w));
+            while let Some((x, y)) = stack.pop() {
+                for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                    for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                        let k = yy * w + xx;
+                        if state[k] & 3 != 0 {
+                            state[k] = 4;
+                            stack.push((xx, yy));
                         }
                     }
                 }
             }
         }
+        i += 1;
     }
-    out
+    state.iter().map(|&s| s == 4).collect()
 }

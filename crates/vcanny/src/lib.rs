@@ -119,31 +119,9 @@ pub struct Edges {
 pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, params: &Params) -> Edges {
     let _s = tracing::info_span!("vcanny", w = valid.width(), h = valid.height(), channels = channels.len())
         .entered();
-    if let Err(e) = params.validate() {
-        panic!("invalid vcanny params: {e}");
-    }
     assert!(!channels.is_empty(), "vcanny::detect needs at least one channel");
-    assert_eq!(channels.len(), weights.len(), "one weight per channel");
     assert!(channels.iter().all(|c| c.same_size(valid)), "channels and mask differ in size");
-    assert!(
-        weights.iter().all(|w| w.is_finite() && *w >= 0.0),
-        "weights must be finite and ≥ 0: {weights:?}"
-    );
-    let (w, h) = (valid.width() as usize, valid.height() as usize);
-    let ok: Vec<bool> = (0..w * h)
-        .map(|i| valid.as_slice()[i] && channels.iter().all(|c| c.as_slice()[i].is_finite()))
-        .collect();
-    let g = gradient::gaussian(params.sigma_px, params.kernel_px);
-    let grad = gradient::gradient(channels, weights, &ok, w, h, &g);
-    let nms = canny::non_max_suppression(&grad.magnitude, &grad.direction, &ok, w, h);
-    let (low, high) = canny::absolute_thresholds(&params.thresholds, &grad.magnitude, &ok);
-    let edges = canny::hysteresis(&grad.magnitude, &nms, w, h, low, high);
-    tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
-    let (wu, hu) = (valid.width(), valid.height());
-    Edges {
-        edges: Grid::from_vec(wu, hu, edges).expect("size matches"),
-        magnitude: Grid::from_vec(wu, hu, grad.magnitude).expect("size matches"),
-    }
+    run(&gradient::Input::Stack(channels), weights, Some(valid), valid.dimensions(), params)
 }
 
 /// Canny on the plane parameters `[a, b, c]` with the weights of `params`.
@@ -151,10 +129,9 @@ pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, para
 /// # Panics
 /// If `plane` and `valid` differ in size or `params` is invalid.
 pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> Edges {
-    let a = plane.map(|p| p[0]);
-    let b = plane.map(|p| p[1]);
-    let c = plane.map(|p| p[2]);
-    detect(&[&a, &b, &c], &params.weights, valid, params)
+    let _s = tracing::info_span!("vcanny", w = valid.width(), h = valid.height(), channels = 3).entered();
+    assert!(plane.same_size(valid), "plane map and mask differ in size");
+    run(&gradient::Input::Planes(plane.as_slice()), &params.weights, Some(valid), valid.dimensions(), params)
 }
 
 /// Canny on the raw range image (the baseline of the paper's Table I); `params.weights` is not used.
@@ -162,9 +139,41 @@ pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> E
 /// # Panics
 /// If `params` is invalid.
 pub fn detect_raw(range: &RangeImage, params: &Params) -> Edges {
-    let valid = range.map(|v| v.is_finite());
-    detect(&[range], &[1.0], &valid, params)
+    let _s = tracing::info_span!("vcanny", w = range.width(), h = range.height(), channels = 1).entered();
+    run(&gradient::Input::Stack(&[range]), &[1.0], None, range.dimensions(), params)
 }
 
+/// The detector on `input`; `valid = None` means every pixel (where the channels are finite).
+fn run(
+    input: &gradient::Input<'_>,
+    weights: &[f32],
+    valid: Option<&Grid<bool>>,
+    (wu, hu): (u32, u32),
+    params: &Params,
+) -> Edges {
+    if let Err(e) = params.validate() {
+        panic!("invalid vcanny params: {e}");
+    }
+    assert_eq!(input.len(), weights.len(), "one weight per channel");
+    assert!(
+        weights.iter().all(|w| w.is_finite() && *w >= 0.0),
+        "weights must be finite and ≥ 0: {weights:?}"
+    );
+    let (w, h) = (wu as usize, hu as usize);
+    let g = gradient::gaussian(params.sigma_px, params.kernel_px);
+    // Quantile thresholds count the magnitudes while each row is in cache.
+    let mut hist = (params.thresholds.mode != ThresholdMode::Absolute).then(canny::Histogram::new);
+    let mut grad = gradient::gradient(input, weights, valid.map(|v| v.as_slice()), w, h, &g, hist.as_mut());
+    let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist.as_ref());
+    let edges = canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, low, high);
+    tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
+    Edges {
+        edges: Grid::from_vec(wu, hu, edges).expect("size matches"),
+        magnitude: Grid::from_vec(wu, hu, grad.magnitude).expect("size matches"),
+    }
+}
+
+#[cfg(test)]
+mod reference;
 #[cfg(test)]
 mod tests;

@@ -256,3 +256,183 @@ fn params_from_toml_and_validation() {
     assert!(abs(3.0, 2.0).validate().is_err());
     assert!(Params { weights: [0.0; 3], ..Params::default() }.validate().is_err());
 }
+
+mod fast_path {
+    //! The streamed, vectorisable implementation against the straightforward one (`reference.rs`) on random
+    //! images with holes: bit-identical magnitudes and identical edges.
+
+    use super::*;
+    use crate::reference;
+    use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+
+    /// A random channel: a few planes with steps, noise, and sometimes NaN / infinite values.
+    fn channel(rng: &mut Xoshiro256PlusPlus, w: u32, h: u32, holes: f32) -> Grid<f32> {
+        let (a, b, c) = (
+            rng.random_range(-2.0..2.0f32),
+            rng.random_range(-2.0..2.0f32),
+            rng.random_range(-50.0..50.0f32),
+        );
+        let split = rng.random_range(0..=w);
+        let step = rng.random_range(-20.0..20.0f32);
+        let noise = rng.random_range(0.0..1.0f32);
+        let quantise = rng.random_bool(0.5);
+        Grid::from_fn(w, h, |x, y| {
+            let u: f32 = rng.random();
+            if u < holes {
+                return if rng.random_bool(0.9) { f32::NAN } else { f32::INFINITY };
+            }
+            let mut v = a * x as f32 + b * y as f32 + c + if x >= split { step } else { 0.0 };
+            v += noise * rng.random_range(-1.0..1.0f32);
+            if quantise { v.round() } else { v }
+        })
+    }
+
+    fn params(rng: &mut Xoshiro256PlusPlus) -> Params {
+        let mode = [ThresholdMode::Absolute, ThresholdMode::Quantile, ThresholdMode::NoiseRelative]
+            [rng.random_range(0..3usize)];
+        let (low, high) = match mode {
+            ThresholdMode::Absolute => {
+                let l = rng.random_range(0.0..2.0f32);
+                (l, l + rng.random_range(0.0..3.0f32))
+            }
+            ThresholdMode::Quantile => {
+                let l = rng.random_range(0.0..1.0f32);
+                (l, rng.random_range(l..=1.0))
+            }
+            ThresholdMode::NoiseRelative => {
+                let l = rng.random_range(0.0..3.0f32);
+                (l, l + rng.random_range(0.0..5.0f32))
+            }
+        };
+        Params {
+            sigma_px: rng.random_range(0.3..3.0),
+            kernel_px: [1, 3, 5, 5, 7, 9][rng.random_range(0..6usize)],
+            weights: [rng.random_range(0.0..2.0), rng.random_range(0.0..2.0), rng.random_range(0.0..0.2)],
+            thresholds: Thresholds { mode, low, high, noise_floor: 1e-3 },
+        }
+    }
+
+    fn assert_same(fast: &Edges, slow: &Edges, what: &str) {
+        let bits = |e: &Edges| e.magnitude.as_slice().iter().map(|m| m.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(fast), bits(slow), "{what}: magnitudes differ");
+        assert_eq!(fast.edges, slow.edges, "{what}: edges differ");
+    }
+
+    #[test]
+    fn streamed_detector_is_bit_identical_to_the_reference_on_random_images_with_holes() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(17);
+        let (mut n_edges, mut n_unit_diff) = (0, 0);
+        for case in 0..150 {
+            let (w, h) = if case < 20 {
+                (rng.random_range(1..=4u32), rng.random_range(1..=4u32))
+            } else {
+                (rng.random_range(1..=48u32), rng.random_range(1..=40u32))
+            };
+            let holes = [0.0, 0.02, 0.2, 0.6][case % 4];
+            let p = params(&mut rng);
+            let n = rng.random_range(1..=3usize);
+            let chans: Vec<Grid<f32>> = (0..n).map(|_| channel(&mut rng, w, h, holes)).collect();
+            let refs: Vec<&Grid<f32>> = chans.iter().collect();
+            let mut weights: Vec<f32> = p.weights[..n].to_vec();
+            if case % 5 == 0 {
+                weights[0] = 0.0;
+            }
+            let valid = Grid::from_fn(w, h, |_, _| !rng.random_bool(holes as f64 / 2.0));
+            let fast = detect(&refs, &weights, &valid, &p);
+            assert_same(
+                &fast,
+                &reference::detect(&refs, &weights, &valid, &p),
+                &format!("detect case {case}"),
+            );
+            n_edges += fast.edges.as_slice().iter().filter(|&&e| e).count();
+            // Against the detector before the fast path (unit directions): the same magnitudes, and the edges
+            // differ only where rounding of the direction's ratio flips a near-tie of the suppression.
+            let unit = reference::detect_unit_direction(&refs, &weights, &valid, &p);
+            let bits = |e: &Edges| e.magnitude.as_slice().iter().map(|m| m.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&fast),
+                bits(&unit),
+                "case {case}: magnitudes differ from the unit-direction detector"
+            );
+            n_unit_diff +=
+                fast.edges.as_slice().iter().zip(unit.edges.as_slice()).filter(|(a, b)| a != b).count();
+
+            let raw = detect_raw(&chans[0], &p);
+            let all = Grid::new(w, h, true);
+            assert_same(&raw, &reference::detect(&refs[..1], &[1.0], &all, &p), &format!("raw case {case}"));
+
+            let c3: Vec<Grid<f32>> = (0..3).map(|_| channel(&mut rng, w, h, holes / 4.0)).collect();
+            let plane = Grid::from_fn(w, h, |x, y| [c3[0][(x, y)], c3[1][(x, y)], c3[2][(x, y)]]);
+            let planes = detect_planes(&plane, &valid, &p);
+            let r3: Vec<&Grid<f32>> = c3.iter().collect();
+            assert_same(
+                &planes,
+                &reference::detect(&r3, &p.weights, &valid, &p),
+                &format!("planes case {case}"),
+            );
+        }
+        assert!(n_edges > 1000, "the random cases must exercise the edge paths, got {n_edges} edge pixels");
+        assert!(
+            n_unit_diff * 1000 <= n_edges,
+            "{n_unit_diff} of {n_edges} edge pixels moved with the unit directions"
+        );
+    }
+
+    #[test]
+    fn nms_matches_the_reference_for_any_direction() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        for _ in 0..50 {
+            let (w, h) = (rng.random_range(1..=12usize), rng.random_range(1..=12usize));
+            let mag: Vec<f32> = (0..w * h)
+                .map(|_| if rng.random_bool(0.2) { 0.0 } else { rng.random_range(0..4u8) as f32 })
+                .collect();
+            let dir: Vec<[f32; 2]> = (0..w * h)
+                .map(|_| match rng.random_range(0..4u8) {
+                    0 => [1.0, 0.0],
+                    1 => [0.0, if rng.random_bool(0.5) { 1.0 } else { -1.0 }],
+                    _ => {
+                        let a = rng.random_range(-4.0..4.0f32);
+                        [a.cos(), a.sin()]
+                    }
+                })
+                .collect();
+            let ok: Vec<bool> = (0..w * h).map(|_| !rng.random_bool(0.15)).collect();
+            assert_eq!(
+                non_max_suppression(&mag, &dir, &ok, w, h),
+                reference::non_max_suppression(&mag, &dir, &ok, w, h)
+            );
+        }
+    }
+
+    #[test]
+    fn hysteresis_and_quantiles_match_the_reference() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        for _ in 0..50 {
+            let (w, h) = (rng.random_range(1..=30usize), rng.random_range(1..=30usize));
+            let mag: Vec<f32> = (0..w * h)
+                .map(|_| match rng.random_range(0..5u8) {
+                    0 => 0.0,
+                    1 => -0.0,
+                    2 => rng.random_range(0..6u8) as f32,
+                    3 => -rng.random_range(0.0..3.0f32),
+                    _ => rng.random_range(0.0..10.0f32),
+                })
+                .collect();
+            let cand: Vec<bool> = (0..w * h).map(|_| rng.random_bool(0.6)).collect();
+            let (low, high) = (rng.random_range(0.0..4.0f32), rng.random_range(4.0..8.0f32));
+            assert_eq!(
+                hysteresis(&mag, &cand, w, h, low, high),
+                reference::hysteresis(&mag, &cand, w, h, low, high)
+            );
+            for q in [0.0, 0.1, 0.5, 0.77, 0.9, 1.0] {
+                let mut v: Vec<f32> = mag.iter().zip(&cand).filter(|&(_, &c)| c).map(|(&m, _)| m).collect();
+                let want = reference::quantile(&mut v, q);
+                assert_eq!(
+                    canny::masked_quantiles(&mag, &cand, &[q])[0].to_bits(),
+                    want.to_bits(),
+                    "q = {q}"
+                );
+            }
+        }
+    }
+}
