@@ -1,67 +1,47 @@
 //! Seeding, breadth-first growth, small-region removal, fill and final relabelling.
+//!
+//! Every per-pixel array of the stage is stored with a one-pixel frame (padded width `w + 2`):
+//! neighbours are fixed index deltas and the frame is never growable, so the hot loops need no
+//! bounds or border tests. The label array doubles as the growable mask during seeding and growth
+//! (non-growable pixels and the frame hold [`BLOCKED`]), and the 3D point and local normal of a
+//! pixel sit next to each other, so the growth test of a neighbour touches two cache lines at most.
 
 use crate::merge::{Stats, merge, region_stats};
 use crate::plane::{Moments, Plane, cross, dot};
 use crate::{Info, MAX_RELAXATIONS, Mode, Params, Segmentation, borders};
 use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
-use rangeimage::{Camera, Grid, RangeImage, Region, SurfaceFeatures};
+use rangeimage::{AbwCalibration, Camera, Grid, RangeImage, Region, SurfaceFeatures};
 
-/// Up to 8 in-bounds neighbours of pixel `i = y·w + x`, in the fixed order left, up, right,
-/// down (then the diagonals for 8-connectivity).
+/// Label of pixels that may not join a region (not growable, or the frame) during seeding and growth.
+const BLOCKED: u32 = u32::MAX;
+
+/// The 3D point (first three) and unit local normal (last three) of a geometry record, in `f64`.
 #[inline]
-fn neighbours(i: usize, x: usize, y: usize, w: usize, h: usize, eight: bool) -> ([usize; 8], usize) {
-    let mut out = [0usize; 8];
-    let mut n = 0;
-    let mut push = |j: usize| {
-        out[n] = j;
-        n += 1;
-    };
-    if x > 0 {
-        push(i - 1);
-    }
-    if y > 0 {
-        push(i - w);
-    }
-    if x + 1 < w {
-        push(i + 1);
-    }
-    if y + 1 < h {
-        push(i + w);
-    }
-    if eight {
-        if x > 0 && y > 0 {
-            push(i - w - 1);
-        }
-        if x + 1 < w && y > 0 {
-            push(i - w + 1);
-        }
-        if x > 0 && y + 1 < h {
-            push(i + w - 1);
-        }
-        if x + 1 < w && y + 1 < h {
-            push(i + w + 1);
-        }
-    }
-    (out, n)
+fn point_of(g: &[f32; 6]) -> [f64; 3] {
+    [f64::from(g[0]), f64::from(g[1]), f64::from(g[2])]
 }
 
 #[inline]
-fn f64x3(p: [f32; 3]) -> [f64; 3] {
-    [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]
+fn normal_of(g: &[f32; 6]) -> [f64; 3] {
+    [f64::from(g[3]), f64::from(g[4]), f64::from(g[5])]
 }
 
-/// The per-image data growth reads.
+/// The per-image data growth reads, on the padded grid.
 struct Ctx<'a> {
+    /// Image width and height.
     w: usize,
     h: usize,
+    /// Padded width `w + 2`.
+    pw: usize,
+    /// Neighbour index deltas in the fixed order left, up, right, down, then (8-connectivity)
+    /// up-left, up-right, down-left, down-right.
+    offs: [isize; 8],
     eight: bool,
-    /// 3D points relative to `origin` (NaN where the range is not finite).
-    pts: Vec<[f32; 3]>,
-    /// Pixels that may seed and join regions.
-    growable: Vec<bool>,
-    /// Default mode: unit local normals toward the sensor (empty in paper mode).
-    normals: Vec<[f32; 3]>,
-    k: &'a [f32],
+    /// Per padded pixel: 3D point relative to `origin` (NaN where the range is not finite) and,
+    /// in default mode, the unit local normal toward the sensor (NaN where not computed).
+    geo: Vec<[f32; 6]>,
+    /// K per padded pixel (NaN on the frame).
+    k: Vec<f32>,
     origin: [f64; 3],
     camera: &'a Camera,
 }
@@ -71,6 +51,302 @@ impl Ctx<'_> {
         let o = self.origin;
         self.camera.toward_sensor([p_rel[0] + o[0], p_rel[1] + o[1], p_rel[2] + o[2]])
     }
+
+    /// Padded index of pixel `(x, y)`.
+    #[inline]
+    fn pad(&self, x: usize, y: usize) -> usize {
+        (y + 1) * self.pw + x + 1
+    }
+}
+
+/// Sets the one-pixel frame of a padded array of width `pw` to `v`.
+fn set_frame<T: Copy>(a: &mut [T], pw: usize, v: T) {
+    let n = a.len();
+    a[..pw + 1].fill(v);
+    a[n - pw - 1..].fill(v);
+    // Right frame of row y and left frame of row y + 1 are adjacent.
+    let mut i = 2 * pw - 1;
+    while i + 1 < n - pw {
+        a[i] = v;
+        a[i + 1] = v;
+        i += pw;
+    }
+}
+
+/// A camera model with its variant resolved, so per-pixel loops carry no `match`.
+/// Every formula repeats [`Camera::point`] operation for operation (bit-identical results).
+trait Proj {
+    /// The 3D point of pixel `(x, y)` with finite range `v`.
+    fn point(&self, x: f64, y: f64, v: f64) -> [f64; 3];
+    /// `∂P/∂x`, `∂P/∂y`, `∂P/∂v` at `(x, y, v)`.
+    fn jacobian(&self, x: f64, y: f64, v: f64) -> [[f64; 3]; 3];
+    /// Unit vector toward the sensor at `(x, y, v)`.
+    fn toward(&self, x: f64, y: f64, v: f64) -> [f64; 3];
+}
+
+/// The ABW model through the general path (the reference of [`geometry_abw`]).
+#[cfg(test)]
+struct AbwProj(AbwCalibration);
+
+#[cfg(test)]
+impl Proj for AbwProj {
+    #[inline]
+    fn point(&self, x: f64, y: f64, v: f64) -> [f64; 3] {
+        let cal = &self.0;
+        let d = v / cal.scal + cal.offset;
+        let f = cal.f.abs();
+        [(x - 255.0) * d / f, (255.0 - y) / cal.c * d / f, (255.0 - v) / cal.scal]
+    }
+
+    #[inline]
+    fn jacobian(&self, x: f64, y: f64, v: f64) -> [[f64; 3]; 3] {
+        let cal = &self.0;
+        let f = cal.f.abs();
+        let d = v / cal.scal + cal.offset;
+        [
+            [d / f, 0.0, 0.0],
+            [0.0, -d / (cal.c * f), 0.0],
+            [(x - 255.0) / (cal.scal * f), (255.0 - y) / (cal.c * cal.scal * f), -1.0 / cal.scal],
+        ]
+    }
+
+    #[inline]
+    fn toward(&self, _x: f64, _y: f64, _v: f64) -> [f64; 3] {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+/// A pinhole camera (always `Camera::Pinhole`).
+struct PinholeProj(Camera);
+
+impl Proj for PinholeProj {
+    #[inline]
+    fn point(&self, x: f64, y: f64, v: f64) -> [f64; 3] {
+        self.0.point(x, y, v).unwrap_or([f64::NAN; 3])
+    }
+
+    #[inline]
+    fn jacobian(&self, x: f64, y: f64, v: f64) -> [[f64; 3]; 3] {
+        let Camera::Pinhole { fx, fy, cx, cy, depth_scale } = self.0 else {
+            unreachable!("PinholeProj holds a pinhole camera")
+        };
+        let z = v * depth_scale;
+        [
+            [z / fx, 0.0, 0.0],
+            [0.0, z / fy, 0.0],
+            [(x - cx) * depth_scale / fx, (y - cy) * depth_scale / fy, depth_scale],
+        ]
+    }
+
+    #[inline]
+    fn toward(&self, x: f64, y: f64, v: f64) -> [f64; 3] {
+        self.0.toward_sensor(self.point(x, y, v))
+    }
+}
+
+/// The uncalibrated `Camera::Grid`.
+struct GridProj;
+
+impl Proj for GridProj {
+    #[inline]
+    fn point(&self, x: f64, y: f64, v: f64) -> [f64; 3] {
+        [x, y, v]
+    }
+
+    #[inline]
+    fn jacobian(&self, _x: f64, _y: f64, _v: f64) -> [[f64; 3]; 3] {
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    }
+
+    #[inline]
+    fn toward(&self, _x: f64, _y: f64, _v: f64) -> [f64; 3] {
+        [0.0, 0.0, -1.0]
+    }
+}
+
+/// Padded geometry records, initial labels (0 = growable, [`BLOCKED`] otherwise) and the number
+/// of growable pixels.
+#[allow(clippy::too_many_arguments)]
+fn geometry<P: Proj>(
+    proj: &P,
+    range: &[f32],
+    features: &SurfaceFeatures,
+    params: &Params,
+    w: usize,
+    h: usize,
+    origin: [f64; 3],
+) -> (Vec<[f32; 6]>, Vec<u32>, usize) {
+    let pw = w + 2;
+    let pn = pw * (h + 2);
+    let mut geo = vec![[f32::NAN; 6]; pn];
+    let mut labels = vec![BLOCKED; pn];
+    let mut growable = 0usize;
+    let paper = params.mode == Mode::Paper;
+    let k = features.k.as_slice();
+    let curv = features.curvedness.as_slice();
+    let plane = features.plane.as_slice();
+    let max_c = params.max_curvedness;
+    let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
+    for y in 0..h {
+        let yf = y as f64;
+        let src = y * w;
+        let dst = (y + 1) * pw + 1;
+        let rrow = &range[src..src + w];
+        let grow_row = &mut geo[dst..dst + w];
+        let lrow = &mut labels[dst..dst + w];
+        for x in 0..w {
+            let v = rrow[x];
+            if !v.is_finite() {
+                continue;
+            }
+            let (xf, vf) = (x as f64, f64::from(v));
+            let p = proj.point(xf, yf, vf);
+            let g = &mut grow_row[x];
+            g[0] = (p[0] - origin[0]) as f32;
+            g[1] = (p[1] - origin[1]) as f32;
+            g[2] = (p[2] - origin[2]) as f32;
+            if paper {
+                if k[src + x].is_finite() {
+                    lrow[x] = 0;
+                    growable += 1;
+                }
+                continue;
+            }
+            let [a, b, _] = plane[src + x];
+            if !(a.is_finite() && b.is_finite() && curv[src + x] <= max_c) {
+                continue;
+            }
+            if let Some((nrm, slant_cos)) = normal_with(proj, xf, yf, vf, f64::from(a), f64::from(b)) {
+                g[3] = nrm[0] as f32;
+                g[4] = nrm[1] as f32;
+                g[5] = nrm[2] as f32;
+                if slant_cos >= cos_slant {
+                    lrow[x] = 0;
+                    growable += 1;
+                }
+            }
+        }
+    }
+    (geo, labels, growable)
+}
+
+/// Constants of the closed-form ABW local normal (see [`geometry_abw`]).
+struct AbwNormal {
+    /// `−|f|`.
+    af: f64,
+    /// `c·|f|`.
+    bf: f64,
+    /// `offset·scal`.
+    os: f64,
+}
+
+impl AbwNormal {
+    fn new(cal: AbwCalibration) -> Self {
+        let f = cal.f.abs();
+        Self { af: -f, bf: cal.c * f, os: cal.offset * cal.scal }
+    }
+}
+
+/// Unit local normal toward the sensor (so its z is the cosine to the line of sight) for slopes
+/// `(a, b)`, range `v`, `u = x − 255`, `t = 255 − y`, and whether it is defined (finite, non-zero).
+#[inline]
+fn abw_normal(k: &AbwNormal, a: f64, b: f64, v: f64, u: f64, t: f64) -> ([f64; 3], bool) {
+    let ds = v + k.os;
+    let n = [a * k.af, b * k.bf, -(ds + a * u - b * t)];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let inv = 1.0 / len;
+    let inv = if n[2] < 0.0 { -inv } else { inv };
+    // NaN or infinite slopes give a non-finite length.
+    let ok = (len > 0.0) & (len < f64::INFINITY) & (ds != 0.0);
+    ([n[0] * inv, n[1] * inv, n[2] * inv], ok)
+}
+
+/// [`geometry`] for the ABW camera, with the local normal in closed form.
+///
+/// With `F = |f|`, `s = scal`, `u = x − 255`, `t = 255 − y` and `ds = v + offset·s` (the camera's
+/// distance term times `s`), the tangents of [`normal_with`] scaled by `s·F` and `c·s·F` are
+/// `(ds + a·u, a·t/c, −a·F)` and `(b·c·u, −ds + b·t, −b·c·F)`; their cross product is
+/// `ds · (−a·F, b·c·F, −(ds + a·u − b·t))`. Scale factors do not change the unit normal once it is
+/// oriented toward the sensor (+z), so the normal is that last vector, normalised and flipped to
+/// `z ≥ 0`: one square root and one division per pixel instead of the general path's eleven
+/// divisions. Points use [`Camera::point`]'s formula with the divisions by `|f|` and `scal`
+/// replaced by products with reciprocals (within an `f64` ulp, far below the `f32` storage).
+fn geometry_abw(
+    cal: AbwCalibration,
+    range: &[f32],
+    features: &SurfaceFeatures,
+    params: &Params,
+    w: usize,
+    h: usize,
+    origin: [f64; 3],
+) -> (Vec<[f32; 6]>, Vec<u32>, usize) {
+    let pw = w + 2;
+    // Zeroed allocation (no fill pass); every interior record is written below, the frame here.
+    let mut geo = vec![[0.0f32; 6]; pw * (h + 2)];
+    set_frame(&mut geo, pw, [f32::NAN; 6]);
+    let mut labels = vec![BLOCKED; pw * (h + 2)];
+    let paper = params.mode == Mode::Paper;
+    let max_c = params.max_curvedness;
+    let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
+    let f = cal.f.abs();
+    let (inv_f, inv_s) = (1.0 / f, 1.0 / cal.scal);
+    let off = cal.offset;
+    let k = AbwNormal::new(cal);
+    let [o0, o1, o2] = origin;
+    let ux: Vec<f64> = (0..w).map(|x| x as f64 - 255.0).collect();
+    let uf: Vec<f64> = ux.iter().map(|u| u * inv_f).collect();
+    let nan = f32::NAN;
+    let mut growable = 0usize;
+    for y in 0..h {
+        let t = 255.0 - y as f64;
+        let tcf = t / cal.c * inv_f;
+        let (src, dst) = (y * w, (y + 1) * pw + 1);
+        let rrow = &range[src..src + w];
+        let grow_row = &mut geo[dst..dst + w];
+        let lrow = &mut labels[dst..dst + w];
+        if paper {
+            let krow = &features.k.as_slice()[src..src + w];
+            for x in 0..w {
+                let v = rrow[x];
+                let vf = f64::from(v);
+                let d = vf * inv_s + off;
+                let g = &mut grow_row[x];
+                *g = [nan; 6];
+                if v.is_finite() {
+                    g[0] = (uf[x] * d - o0) as f32;
+                    g[1] = (tcf * d - o1) as f32;
+                    g[2] = ((255.0 - vf) * inv_s - o2) as f32;
+                    if krow[x].is_finite() {
+                        lrow[x] = 0;
+                        growable += 1;
+                    }
+                }
+            }
+            continue;
+        }
+        let crow = &features.curvedness.as_slice()[src..src + w];
+        let prow = &features.plane.as_slice()[src..src + w];
+        let cols = ux.iter().zip(&uf).zip(grow_row.iter_mut().zip(lrow.iter_mut()));
+        for (((&v, pl), &c), ((&u, &ufx), (g, lab))) in rrow.iter().zip(prow).zip(crow).zip(cols) {
+            let vf = f64::from(v);
+            let d = vf * inv_s + off;
+            let fin = v.is_finite();
+            let (n, ok) = abw_normal(&k, f64::from(pl[0]), f64::from(pl[1]), vf, u, t);
+            let ok = ok & fin & (c <= max_c);
+            let grow = ok & (n[2] >= cos_slant);
+            *g = [
+                if fin { (ufx * d - o0) as f32 } else { nan },
+                if fin { (tcf * d - o1) as f32 } else { nan },
+                if fin { ((255.0 - vf) * inv_s - o2) as f32 } else { nan },
+                if ok { n[0] as f32 } else { nan },
+                if ok { n[1] as f32 } else { nan },
+                if ok { n[2] as f32 } else { nan },
+            ];
+            *lab = if grow { 0 } else { BLOCKED };
+            growable += usize::from(grow);
+        }
+    }
+    (geo, labels, growable)
 }
 
 pub(crate) fn run(
@@ -85,59 +361,33 @@ pub(crate) fn run(
     let n = w * h;
     let r = range.as_slice();
     let paper = params.mode == Mode::Paper;
-    let k = features.k.as_slice();
     let k_std = features.k_std.as_slice();
+    let pw = w + 2;
+    let pn = pw * (h + 2);
 
     // 3D points relative to the first valid pixel's point (keeps f32 storage and f64 sums exact enough).
     let origin = (0..n)
         .find(|&i| r[i].is_finite())
         .and_then(|i| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i])))
         .unwrap_or([0.0; 3]);
-    let mut pts = vec![[f32::NAN; 3]; n];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if let Some(p) = camera.point(x as f64, y as f64, f64::from(r[i])) {
-                pts[i] = [(p[0] - origin[0]) as f32, (p[1] - origin[1]) as f32, (p[2] - origin[2]) as f32];
-            }
-        }
+    let (geo, mut labels, growable) = match *camera {
+        Camera::Abw(cal) => geometry_abw(cal, r, features, params, w, h, origin),
+        Camera::Pinhole { .. } => geometry(&PinholeProj(*camera), r, features, params, w, h, origin),
+        Camera::Grid => geometry(&GridProj, r, features, params, w, h, origin),
+    };
+    let mut k = vec![0.0f32; pn];
+    set_frame(&mut k, pw, f32::NAN);
+    for (y, row) in features.k.rows().enumerate() {
+        let dst = (y + 1) * pw + 1;
+        k[dst..dst + w].copy_from_slice(row);
     }
-
-    let mut growable = vec![false; n];
-    let mut normals = Vec::new();
-    if paper {
-        for i in 0..n {
-            growable[i] = r[i].is_finite() && k[i].is_finite();
-        }
-    } else {
-        normals = vec![[f32::NAN; 3]; n];
-        let curv = features.curvedness.as_slice();
-        let plane = features.plane.as_slice();
-        let max_c = params.max_curvedness;
-        let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let v = r[i];
-                let [a, b, _] = plane[i];
-                if !(v.is_finite() && a.is_finite() && b.is_finite() && curv[i] <= max_c) {
-                    continue;
-                }
-                if let Some((nrm, slant_cos)) =
-                    local_normal(camera, x as f64, y as f64, f64::from(v), f64::from(a), f64::from(b))
-                {
-                    normals[i] = [nrm[0] as f32, nrm[1] as f32, nrm[2] as f32];
-                    growable[i] = slant_cos >= cos_slant;
-                }
-            }
-        }
-    }
-    let ctx = Ctx { w, h, eight: params.connectivity == 8, pts, growable, normals, k, origin, camera };
+    let p = pw as isize;
+    let offs = [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1];
+    let ctx = Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo, k, origin, camera };
 
     // Seeds: random draws without replacement among the candidates, grown one after the other.
     let mut info = Info::default();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut labels = vec![0u32; n];
     let mut queue: Vec<u32> = Vec::with_capacity(n);
     let mut cand: Vec<u32> = Vec::new();
     let mut t = params.t_sigma;
@@ -145,7 +395,7 @@ pub(crate) fn run(
     let stride = params.seed_stride_px as usize;
     let off = stride / 2;
     // Unlabelled growable pixels left; seeding stops when fewer than a kept region remain.
-    let mut left = ctx.growable.iter().filter(|&&g| g).count();
+    let mut left = growable;
     let min_left = (params.min_region_px as usize).max(1);
     for round in 0..=MAX_RELAXATIONS {
         let last = round == MAX_RELAXATIONS && round > 0;
@@ -155,9 +405,10 @@ pub(crate) fn run(
         cand.clear();
         for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
             for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
-                let i = y * w + x;
-                if labels[i] == 0 && ctx.growable[i] && k_std[i] <= t_round {
-                    cand.push(i as u32);
+                let pi = ctx.pad(x, y);
+                // Label 0 = unlabelled and growable.
+                if labels[pi] == 0 && k_std[y * w + x] <= t_round {
+                    cand.push(pi as u32);
                 }
             }
         }
@@ -174,17 +425,18 @@ pub(crate) fn run(
             if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, &labels) {
                 continue;
             }
-            let grown = if paper {
-                grow_paper(&ctx, params, c, next, &mut labels, &mut queue)
-            } else {
-                grow_default(&ctx, params, c, next, &mut labels, &mut queue)
+            let grown = match (paper, ctx.eight) {
+                (true, false) => grow_paper::<4>(&ctx, params, c, next, &mut labels, &mut queue),
+                (true, true) => grow_paper::<8>(&ctx, params, c, next, &mut labels, &mut queue),
+                (false, false) => grow_default::<4>(&ctx, params, c, next, &mut labels, &mut queue),
+                (false, true) => grow_default::<8>(&ctx, params, c, next, &mut labels, &mut queue),
             };
             left -= grown;
             next += 1;
             info.n_seeds += 1;
         }
         info.t_sigma_used = t_round;
-        if info.n_seeds >= params.min_seeds || info.n_seeds >= params.max_seeds || left == 0 {
+        if info.n_seeds >= params.max_seeds || info.n_seeds >= params.min_seeds || left == 0 {
             break;
         }
         info.n_relaxations += 1;
@@ -192,10 +444,15 @@ pub(crate) fn run(
     }
     info.n_regions_grown = next - 1;
     tracing::debug!(seeds = info.n_seeds, draws = info.n_draws, relaxations = info.n_relaxations, "grown");
+    for l in labels.iter_mut() {
+        if *l == BLOCKED {
+            *l = 0;
+        }
+    }
 
-    // Merge.
+    // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
     let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(&mut labels, next - 1, w, ctx.eight, &ctx.pts, k, params, &toward);
+    let merged = merge(&mut labels, next - 1, pw, ctx.eight, &ctx.geo, &ctx.k, params, &toward);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
     let stats = merged.stats;
@@ -223,25 +480,28 @@ pub(crate) fn run(
         info.n_filled_px = fill(&ctx, params, &stats, &mut labels, &mut queue);
     }
 
-    // Relabel 1..n in raster order of first pixel.
+    // Final statistics under the current labels, then relabel 1..n in raster order of first
+    // pixel while copying out of the padded grid (one pass).
+    let stats = region_stats(&labels, next - 1, &ctx.geo, &ctx.k);
+    let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
+    order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];
-    let mut n_regions = 0u32;
-    for l in labels.iter_mut() {
-        if *l != 0 {
-            let m = &mut map[*l as usize];
-            if *m == 0 {
-                n_regions += 1;
-                *m = n_regions;
-            }
-            *l = *m;
-        }
+    for (new, &old) in order.iter().enumerate() {
+        map[old as usize] = new as u32 + 1;
     }
+    let n_regions = order.len() as u32;
     info.n_regions = n_regions;
-    info.n_unlabelled_valid_px = (0..n).filter(|&i| labels[i] == 0 && r[i].is_finite()).count() as u32;
-
-    let final_stats = region_stats(&labels, n_regions, &ctx.pts, k);
-    let regions = (1..=n_regions).map(|l| region_of(&ctx, l, &final_stats[l as usize])).collect();
-    let labels = Grid::from_vec(wu, hu, labels).expect("same size");
+    let regions = order.iter().zip(1..).map(|(&old, l)| region_of(&ctx, l, &stats[old as usize])).collect();
+    let mut out = Vec::with_capacity(n);
+    let mut unlabelled = 0u32;
+    for (y, rrow) in r.chunks_exact(w.max(1)).take(h).enumerate() {
+        let src = ctx.pad(0, y);
+        let lrow = &labels[src..src + w];
+        out.extend(lrow.iter().map(|&l| map[l as usize]));
+        unlabelled += lrow.iter().zip(rrow).map(|(&l, v)| u32::from(l == 0 && v.is_finite())).sum::<u32>();
+    }
+    info.n_unlabelled_valid_px = unlabelled;
+    let labels = Grid::from_vec(wu, hu, out).expect("same size");
     let c1 = borders(&labels, params.c1_one_sided);
     tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
     (Segmentation { labels, regions, c1 }, info)
@@ -251,30 +511,22 @@ pub(crate) fn run(
 /// pixel) at pixel `(x, y)` with range `v`, from the camera's analytic Jacobian
 /// (tangents `∂P/∂x + a·∂P/∂v` and `∂P/∂y + b·∂P/∂v`), and the cosine of its angle to the
 /// direction toward the sensor.
+#[cfg(test)]
 fn local_normal(camera: &Camera, x: f64, y: f64, v: f64, a: f64, b: f64) -> Option<([f64; 3], f64)> {
     if !v.is_finite() {
         return None;
     }
-    let (px, py, pv) = match *camera {
-        Camera::Abw(cal) => {
-            let f = cal.f.abs();
-            let d = v / cal.scal + cal.offset;
-            (
-                [d / f, 0.0, 0.0],
-                [0.0, -d / (cal.c * f), 0.0],
-                [(x - 255.0) / (cal.scal * f), (255.0 - y) / (cal.c * cal.scal * f), -1.0 / cal.scal],
-            )
-        }
-        Camera::Pinhole { fx, fy, cx, cy, depth_scale } => {
-            let z = v * depth_scale;
-            (
-                [z / fx, 0.0, 0.0],
-                [0.0, z / fy, 0.0],
-                [(x - cx) * depth_scale / fx, (y - cy) * depth_scale / fy, depth_scale],
-            )
-        }
-        Camera::Grid => ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
-    };
+    match *camera {
+        Camera::Abw(cal) => normal_with(&AbwProj(cal), x, y, v, a, b),
+        Camera::Pinhole { .. } => normal_with(&PinholeProj(*camera), x, y, v, a, b),
+        Camera::Grid => normal_with(&GridProj, x, y, v, a, b),
+    }
+}
+
+/// [`local_normal`] for a resolved camera model and a finite `v`.
+#[inline]
+fn normal_with<P: Proj>(proj: &P, x: f64, y: f64, v: f64, a: f64, b: f64) -> Option<([f64; 3], f64)> {
+    let [px, py, pv] = proj.jacobian(x, y, v);
     let tx = [px[0] + a * pv[0], px[1] + a * pv[1], px[2] + a * pv[2]];
     let ty = [py[0] + b * pv[0], py[1] + b * pv[1], py[2] + b * pv[2]];
     let mut nrm = cross(tx, ty);
@@ -283,11 +535,7 @@ fn local_normal(camera: &Camera, x: f64, y: f64, v: f64, a: f64, b: f64) -> Opti
         return None;
     }
     nrm = [nrm[0] / len, nrm[1] / len, nrm[2] / len];
-    let toward = match camera {
-        Camera::Abw(_) => [0.0, 0.0, 1.0],
-        Camera::Grid => [0.0, 0.0, -1.0],
-        Camera::Pinhole { .. } => camera.toward_sensor(camera.point(x, y, v)?),
-    };
+    let toward = proj.toward(x, y, v);
     let c = dot(nrm, toward);
     if c < 0.0 {
         nrm = [-nrm[0], -nrm[1], -nrm[2]];
@@ -296,8 +544,8 @@ fn local_normal(camera: &Camera, x: f64, y: f64, v: f64, a: f64, b: f64) -> Opti
 }
 
 /// Default mode: grows region `id` from `seed` with the curvedness, normal-angle and plane
-/// residual tests, refitting the region plane on an amortised schedule.
-fn grow_default(
+/// residual tests, refitting the region plane on an amortised schedule. `N` = connectivity.
+fn grow_default<const N: usize>(
     ctx: &Ctx<'_>,
     params: &Params,
     seed: usize,
@@ -305,40 +553,47 @@ fn grow_default(
     labels: &mut [u32],
     queue: &mut Vec<u32>,
 ) -> usize {
-    let (w, h) = (ctx.w, ctx.h);
+    let offs: [isize; N] = std::array::from_fn(|d| ctx.offs[d]);
     let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
     let max_res = f64::from(params.max_residual);
     let refit_min = params.refit_every_px as usize;
+    let geo = &ctx.geo[..];
     queue.clear();
     queue.push(seed as u32);
     labels[seed] = id;
-    let p0 = f64x3(ctx.pts[seed]);
-    let mut plane = Plane::through(p0, f64x3(ctx.normals[seed]));
+    let mut plane = Plane::through(point_of(&geo[seed]), normal_of(&geo[seed]));
+    // Moments of `queue[..summed]`. The queue holds the region's pixels in order of addition, so
+    // summing it lazily at refit time gives the same sums as adding each pixel on acceptance,
+    // keeps the hot loop short, and skips the pixels added after the last refit.
     let mut mom = Moments::default();
-    mom.add(p0);
+    let mut summed = 0usize;
     let mut count = 1usize;
     let mut last_refit = 0usize;
     let mut head = 0;
     while head < queue.len() {
         let i = queue[head] as usize;
         head += 1;
-        let (nb, nn) = neighbours(i, i % w, i / w, w, h, ctx.eight);
-        for &j in &nb[..nn] {
-            if labels[j] != 0 || !ctx.growable[j] {
+        for o in offs {
+            let j = i.wrapping_add_signed(o);
+            // 0 = unlabelled and growable ([`BLOCKED`] covers the rest and the frame).
+            if labels[j] != 0 {
                 continue;
             }
-            let q = f64x3(ctx.pts[j]);
-            if plane.distance(q).abs() > max_res {
+            let g = &geo[j];
+            if plane.distance(point_of(g)).abs() > max_res {
                 continue;
             }
-            if dot(f64x3(ctx.normals[j]), plane.normal).abs() < cos_max {
+            if dot(normal_of(g), plane.normal).abs() < cos_max {
                 continue;
             }
             labels[j] = id;
             queue.push(j as u32);
-            mom.add(q);
             count += 1;
             if count - last_refit >= refit_min.max(count / 4) {
+                for &p in &queue[summed..] {
+                    mom.add(point_of(&geo[p as usize]));
+                }
+                summed = queue.len();
                 if let Some(p) = mom.fit(|p| ctx.toward(p)) {
                     plane = p;
                 }
@@ -350,8 +605,8 @@ fn grow_default(
 }
 
 /// Paper mode: grows region `id` from `seed`; a neighbour joins if its K is within
-/// `max_k_diff` of the region's running mean K.
-fn grow_paper(
+/// `max_k_diff` of the region's running mean K. `N` = connectivity.
+fn grow_paper<const N: usize>(
     ctx: &Ctx<'_>,
     params: &Params,
     seed: usize,
@@ -359,23 +614,24 @@ fn grow_paper(
     labels: &mut [u32],
     queue: &mut Vec<u32>,
 ) -> usize {
-    let (w, h) = (ctx.w, ctx.h);
+    let offs: [isize; N] = std::array::from_fn(|d| ctx.offs[d]);
     let max_dk = f64::from(params.max_k_diff);
+    let k = &ctx.k[..];
     queue.clear();
     queue.push(seed as u32);
     labels[seed] = id;
-    let mut sum_k = f64::from(ctx.k[seed]);
+    let mut sum_k = f64::from(k[seed]);
     let mut count = 1.0f64;
     let mut head = 0;
     while head < queue.len() {
         let i = queue[head] as usize;
         head += 1;
-        let (nb, nn) = neighbours(i, i % w, i / w, w, h, ctx.eight);
-        for &j in &nb[..nn] {
-            if labels[j] != 0 || !ctx.growable[j] {
+        for o in offs {
+            let j = i.wrapping_add_signed(o);
+            if labels[j] != 0 {
                 continue;
             }
-            let kj = f64::from(ctx.k[j]);
+            let kj = f64::from(k[j]);
             if (kj - sum_k / count).abs() > max_dk {
                 continue;
             }
@@ -388,27 +644,29 @@ fn grow_paper(
     count as usize
 }
 
-/// Whether `c` may seed: every pixel of its `(2·radius+1)²` window lies in the image, is unlabelled
-/// and growable, and passes the growth test of the mode against the seed's own local plane (default
-/// mode) or K (paper mode). Rejects seeds on noise, near depth jumps and on creases.
+/// Whether `c` (padded index) may seed: every pixel of its `(2·radius+1)²` window lies in the
+/// image, is unlabelled and growable, and passes the growth test of the mode against the seed's
+/// own local plane (default mode) or K (paper mode). Rejects seeds on noise, near depth jumps and
+/// on creases.
 fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u32]) -> bool {
     if radius == 0 {
         return true;
     }
-    let (w, h) = (ctx.w, ctx.h);
-    let (x, y) = (c % w, c / w);
+    let (w, h, pw) = (ctx.w, ctx.h, ctx.pw);
+    let (x, y) = (c % pw - 1, c / pw - 1);
     if x < radius || y < radius || x + radius >= w || y + radius >= h {
         return false;
     }
-    let paper = ctx.normals.is_empty();
+    let paper = params.mode == Mode::Paper;
     let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
     let max_res = f64::from(params.max_residual);
     let max_dk = params.max_k_diff;
     let kc = ctx.k[c];
-    let plane = (!paper).then(|| Plane::through(f64x3(ctx.pts[c]), f64x3(ctx.normals[c])));
+    let plane = (!paper).then(|| Plane::through(point_of(&ctx.geo[c]), normal_of(&ctx.geo[c])));
     for yy in y - radius..=y + radius {
-        for j in yy * w + x - radius..=yy * w + x + radius {
-            if labels[j] != 0 || !ctx.growable[j] {
+        let row = ctx.pad(x - radius, yy);
+        for j in row..=row + 2 * radius {
+            if labels[j] != 0 {
                 return false;
             }
             match &plane {
@@ -418,8 +676,9 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
                     }
                 }
                 Some(pl) => {
-                    if pl.distance(f64x3(ctx.pts[j])).abs() > max_res
-                        || dot(f64x3(ctx.normals[j]), pl.normal).abs() < cos_max
+                    let g = &ctx.geo[j];
+                    if pl.distance(point_of(g)).abs() > max_res
+                        || dot(normal_of(g), pl.normal).abs() < cos_max
                     {
                         return false;
                     }
@@ -433,8 +692,9 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
 /// Gives unlabelled valid pixels to the 4-adjacent region whose plane is nearest (if within
 /// `fill_max_residual`), flooding breadth-first from the region borders. Returns the pixel count.
 fn fill(ctx: &Ctx<'_>, params: &Params, stats: &[Stats], labels: &mut [u32], queue: &mut Vec<u32>) -> u32 {
-    let (w, h) = (ctx.w, ctx.h);
     let max_res = f64::from(params.fill_max_residual);
+    let offs: [isize; 4] = std::array::from_fn(|d| ctx.offs[d]);
+    let geo = &ctx.geo[..];
     // Planes of the surviving regions (fitted in both modes: this step is geometric).
     let mut used = vec![false; stats.len()];
     for &l in labels.iter() {
@@ -445,14 +705,12 @@ fn fill(ctx: &Ctx<'_>, params: &Params, stats: &[Stats], labels: &mut [u32], que
         .zip(&used)
         .map(|(s, &u)| if u && s.count >= 3 { s.mom.fit(|p| ctx.toward(p)) } else { None })
         .collect();
-    let free = |labels: &[u32], j: usize| labels[j] == 0 && ctx.pts[j][0].is_finite();
+    // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
+    let free = |labels: &[u32], j: usize| labels[j] == 0 && geo[j][0].is_finite();
     queue.clear();
-    for i in 0..w * h {
-        if free(labels, i) {
-            let (nb, nn) = neighbours(i, i % w, i / w, w, h, false);
-            if nb[..nn].iter().any(|&j| labels[j] != 0) {
-                queue.push(i as u32);
-            }
+    for i in 0..labels.len() {
+        if free(labels, i) && offs.iter().any(|&o| labels[i.wrapping_add_signed(o)] != 0) {
+            queue.push(i as u32);
         }
     }
     let mut filled = 0;
@@ -463,11 +721,10 @@ fn fill(ctx: &Ctx<'_>, params: &Params, stats: &[Stats], labels: &mut [u32], que
         if labels[i] != 0 {
             continue;
         }
-        let p = f64x3(ctx.pts[i]);
-        let (nb, nn) = neighbours(i, i % w, i / w, w, h, false);
+        let p = point_of(&geo[i]);
         let mut best = (f64::INFINITY, 0u32);
-        for &j in &nb[..nn] {
-            let l = labels[j];
+        for o in offs {
+            let l = labels[i.wrapping_add_signed(o)];
             if l == 0 {
                 continue;
             }
@@ -481,7 +738,8 @@ fn fill(ctx: &Ctx<'_>, params: &Params, stats: &[Stats], labels: &mut [u32], que
         if best.0 <= max_res {
             labels[i] = best.1;
             filled += 1;
-            for &j in &nb[..nn] {
+            for o in offs {
+                let j = i.wrapping_add_signed(o);
                 if free(labels, j) {
                     queue.push(j as u32);
                 }
@@ -533,6 +791,85 @@ mod tests {
             assert_relative_eq!(dot(n, t1) / l1, 0.0, epsilon = 1e-3);
             assert_relative_eq!(dot(n, t2) / l2, 0.0, epsilon = 1e-3);
             assert!(dot(n, cam.toward_sensor(p0)) > 0.0 && c > 0.0 && c <= 1.0);
+        }
+    }
+
+    /// The closed-form ABW geometry equals the general Jacobian path: same growable pixels,
+    /// points within f32 rounding, normals to 1e-6, on both calibrations and both modes.
+    #[test]
+    fn abw_fast_geometry_matches_general_path() {
+        let s = crate::testutil::abw_like_scene(96);
+        let (w, h) = (96usize, 96usize);
+        let r = s.range.as_slice();
+        for cal in [AbwCalibration::CAL0, AbwCalibration::CAL1] {
+            for params in
+                [Params::default(), Params::paper(), Params { max_slant_deg: 40.0, ..Params::default() }]
+            {
+                let origin = Camera::Abw(cal).point(3.0, 5.0, 100.0).unwrap();
+                let (g0, l0, n0) = geometry(&AbwProj(cal), r, &s.features, &params, w, h, origin);
+                let (g1, l1, n1) = geometry_abw(cal, r, &s.features, &params, w, h, origin);
+                assert_eq!((n0, &l0), (n1, &l1));
+                assert!(n0 > 1000, "{n0} growable pixels");
+                for (a, b) in g0.iter().zip(&g1) {
+                    for c in 0..6 {
+                        assert_eq!(a[c].is_nan(), b[c].is_nan(), "{a:?} vs {b:?}");
+                        if a[c].is_finite() {
+                            let tol = if c < 3 { 1e-6 * a[c].abs().max(1.0) } else { 1e-6 };
+                            assert!((a[c] - b[c]).abs() <= tol, "{a:?} vs {b:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Random slopes and ranges: the closed-form normal equals `normal_with` (f64, 1e-12).
+    #[test]
+    fn abw_closed_form_normal_matches_jacobian() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+        for _ in 0..1000 {
+            let cal =
+                if rng.random_range(0..2u32) == 0 { AbwCalibration::CAL0 } else { AbwCalibration::CAL1 };
+            let (x, y) = (rng.random_range(0..512u32), rng.random_range(0..512u32));
+            let v = rng.random_range(1.0f32..255.0);
+            let (a, b) = (rng.random_range(-30.0f32..30.0), rng.random_range(-30.0f32..30.0));
+            let (n_ref, c_ref) = normal_with(
+                &AbwProj(cal),
+                f64::from(x),
+                f64::from(y),
+                f64::from(v),
+                f64::from(a),
+                f64::from(b),
+            )
+            .unwrap();
+            let (n, ok) = abw_normal(
+                &AbwNormal::new(cal),
+                f64::from(a),
+                f64::from(b),
+                f64::from(v),
+                f64::from(x) - 255.0,
+                255.0 - f64::from(y),
+            );
+            assert!(ok);
+            for c in 0..3 {
+                assert_relative_eq!(n[c], n_ref[c], epsilon = 1e-12);
+            }
+            assert_relative_eq!(n[2], c_ref, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn set_frame_marks_exactly_the_frame() {
+        for (w, h) in [(1usize, 1usize), (3, 2), (5, 4), (2, 7)] {
+            let pw = w + 2;
+            let mut a = vec![0u8; pw * (h + 2)];
+            set_frame(&mut a, pw, 1);
+            for (i, &v) in a.iter().enumerate() {
+                let (x, y) = (i % pw, i / pw);
+                let frame = x == 0 || y == 0 || x == pw - 1 || y == h + 1;
+                assert_eq!(v == 1, frame, "w {w} h {h} at ({x}, {y})");
+            }
         }
     }
 }

@@ -40,6 +40,8 @@
 //! 5. **C1** = [`borders`] of the final labels.
 //!
 //! The stage is single-threaded and fully deterministic for a given input, params and seed.
+//! Internally every per-pixel array carries a one-pixel frame so that the growth loops use fixed
+//! neighbour index deltas without border tests (see the `grow` module).
 
 mod grow;
 mod merge;
@@ -289,24 +291,32 @@ pub fn borders(labels: &LabelImage, one_sided: bool) -> EdgeMap {
     let l = labels.as_slice();
     let (w, h) = (w as usize, h as usize);
     let mut out = vec![false; w * h];
+    // One pixel given its four neighbours; a missing neighbour (image frame) is passed as the
+    // pixel's own label, which never differs from it and is never 0 where it is labelled.
+    let test = |a: u32, left: u32, right: u32, up: u32, down: u32| -> bool {
+        let border = if one_sided {
+            (right != a) | (down != a) | (left == 0) | (up == 0)
+        } else {
+            (right != a) | (down != a) | (left != a) | (up != a)
+        };
+        (a != 0) & border
+    };
     for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let a = l[i];
-            if a == 0 {
-                continue;
-            }
-            let right = (x + 1 < w).then(|| l[i + 1]);
-            let down = (y + 1 < h).then(|| l[i + w]);
-            let left = (x > 0).then(|| l[i - 1]);
-            let up = (y > 0).then(|| l[i - w]);
-            let border = if one_sided {
-                [right, down].into_iter().flatten().any(|b| b != a)
-                    || [left, up].into_iter().flatten().any(|b| b == 0)
-            } else {
-                [right, down, left, up].into_iter().flatten().any(|b| b != a)
-            };
-            out[i] = border;
+        let row = &l[y * w..(y + 1) * w];
+        let up = if y > 0 { &l[(y - 1) * w..y * w] } else { row };
+        let down = if y + 1 < h { &l[(y + 1) * w..(y + 2) * w] } else { row };
+        let o = &mut out[y * w..(y + 1) * w];
+        if w == 1 {
+            o[0] = test(row[0], row[0], row[0], up[0], down[0]);
+            continue;
+        }
+        o[0] = test(row[0], row[0], row[1], up[0], down[0]);
+        o[w - 1] = test(row[w - 1], row[w - 2], row[w - 1], up[w - 1], down[w - 1]);
+        // Interior columns: equal-length slices, no bounds tests (vectorises).
+        let mid =
+            row[1..w - 1].iter().zip(&row[..w - 2]).zip(&row[2..]).zip(&up[1..w - 1]).zip(&down[1..w - 1]);
+        for (((((&a, &lf), &rt), &u), &d), o) in mid.zip(&mut o[1..w - 1]) {
+            *o = test(a, lf, rt, u, d);
         }
     }
     Grid::from_vec(labels.width(), labels.height(), out).expect("same size")

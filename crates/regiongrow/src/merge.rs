@@ -36,25 +36,69 @@ impl Stats {
     }
 }
 
-/// Statistics of labels `0..=max_label` (entry 0 unused) in raster order.
-pub(crate) fn region_stats(labels: &[u32], max_label: u32, pts: &[[f32; 3]], k: &[f32]) -> Vec<Stats> {
+/// Statistics of labels `0..=max_label` (entry 0 unused) in raster order. `pts[i]` starts with
+/// the 3D point of pixel `i` (`N ≥ 3`; the growth stage stores the normal after it).
+///
+/// Runs of equal labels along the raster are accumulated in a local copy (same addition order as
+/// pixel by pixel, so the sums are bit-identical), which keeps the hot loop out of memory.
+pub(crate) fn region_stats<const N: usize>(
+    labels: &[u32],
+    max_label: u32,
+    pts: &[[f32; N]],
+    k: &[f32],
+) -> Vec<Stats> {
     let mut st = vec![Stats { first: u32::MAX, ..Stats::default() }; max_label as usize + 1];
-    for (i, &l) in labels.iter().enumerate() {
+    let n = labels.len();
+    assert!(pts.len() == n && k.len() == n && N >= 3, "region_stats: array sizes differ");
+    let mut i = 0;
+    while i < n {
+        let l = labels[i];
         if l == 0 {
+            i += 1;
             continue;
         }
-        let s = &mut st[l as usize];
+        let mut s = st[l as usize];
         if s.count == 0 {
             s.first = i as u32;
         }
-        s.count += 1;
-        let kv = k[i];
-        if kv.is_finite() {
-            s.sum_k += f64::from(kv);
-            s.n_k += 1;
+        // [Σx, Σy, Σz, Σxx, Σxy, Σxz, Σyy, Σyz, Σzz, ΣK]: adding 0 for a non-finite K leaves the
+        // (never −0) sum unchanged, and integer counts in f64 are exact, so this equals the
+        // pixel-by-pixel `Moments::add` sequence bit for bit.
+        let mut acc = [
+            s.mom.s[0],
+            s.mom.s[1],
+            s.mom.s[2],
+            s.mom.ss[0],
+            s.mom.ss[1],
+            s.mom.ss[2],
+            s.mom.ss[3],
+            s.mom.ss[4],
+            s.mom.ss[5],
+            s.sum_k,
+        ];
+        let start = i;
+        let mut n_k = 0u32;
+        while i < n && labels[i] == l {
+            let p = &pts[i];
+            let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            let kv = k[i];
+            let fin = kv.is_finite();
+            n_k += u32::from(fin);
+            let kf = if fin { f64::from(kv) } else { 0.0 };
+            let t = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z, kf];
+            for (a, t) in acc.iter_mut().zip(t) {
+                *a += t;
+            }
+            i += 1;
         }
-        let p = pts[i];
-        s.mom.add([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]);
+        let run = (i - start) as u32;
+        s.count += run;
+        s.n_k += n_k;
+        s.mom.n += f64::from(run);
+        s.mom.s = [acc[0], acc[1], acc[2]];
+        s.mom.ss = [acc[3], acc[4], acc[5], acc[6], acc[7], acc[8]];
+        s.sum_k = acc[9];
+        st[l as usize] = s;
     }
     st
 }
@@ -126,12 +170,12 @@ pub(crate) struct Merged {
 /// label of a union is the one whose region starts first in raster order. Nothing depends on the
 /// numeric label values, so a relabelled input yields the same partition.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn merge(
+pub(crate) fn merge<const N: usize>(
     labels: &mut [u32],
     max_label: u32,
     width: usize,
     eight: bool,
-    pts: &[[f32; 3]],
+    pts: &[[f32; N]],
     k: &[f32],
     params: &Params,
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
@@ -146,32 +190,52 @@ pub(crate) fn merge(
     // Region adjacency graph from pixel pairs (right, down, and the two diagonals for 8-connectivity).
     let height = labels.len().checked_div(width).unwrap_or(0);
     let mut pairs: Vec<(u32, u32)> = Vec::new();
-    let mut push = |a: u32, b: u32| {
-        if a != 0 && b != 0 && a != b {
-            pairs.push((a.min(b), a.max(b)));
+    // Pairs of one pixel `x` of `row` with its right and lower (and lower diagonal) neighbours.
+    let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>| {
+        let mut push = |a: u32, b: u32| {
+            if a != 0 && b != 0 && a != b {
+                pairs.push((a.min(b), a.max(b)));
+            }
+        };
+        let a = row[x];
+        if a == 0 {
+            return;
         }
-    };
-    for y in 0..height {
-        for x in 0..width {
-            let i = y * width + x;
-            let a = labels[i];
-            if a == 0 {
-                continue;
-            }
-            if x + 1 < width {
-                push(a, labels[i + 1]);
-            }
-            if y + 1 < height {
-                push(a, labels[i + width]);
-                if eight {
-                    if x + 1 < width {
-                        push(a, labels[i + width + 1]);
-                    }
-                    if x > 0 {
-                        push(a, labels[i + width - 1]);
-                    }
+        if x + 1 < row.len() {
+            push(a, row[x + 1]);
+        }
+        if let Some(&b) = below.get(x) {
+            push(a, b);
+            if eight {
+                if x + 1 < row.len() {
+                    push(a, below[x + 1]);
+                }
+                if x > 0 {
+                    push(a, below[x - 1]);
                 }
             }
+        }
+    };
+    const CHUNK: usize = 16;
+    for y in 0..height {
+        let row = &labels[y * width..(y + 1) * width];
+        let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
+        let mut x = 0;
+        if !eight && !below.is_empty() {
+            // Skip runs of 16 pixels equal to their right and lower neighbours (no pairs there).
+            while x + CHUNK < width {
+                let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
+                let diff = r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | (p ^ q) | (p ^ s));
+                if diff != 0 {
+                    for xx in x..x + CHUNK {
+                        scan(row, below, xx, &mut pairs);
+                    }
+                }
+                x += CHUNK;
+            }
+        }
+        for xx in x..width {
+            scan(row, below, xx, &mut pairs);
         }
     }
     pairs.sort_unstable();
@@ -320,5 +384,53 @@ mod tests {
         let mut l = labels0.clone();
         let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::default(), &toward);
         assert_eq!((m.n_merged, l), (0, labels0));
+    }
+
+    /// The run-wise accumulation equals `Moments::add` pixel by pixel, bit for bit.
+    #[test]
+    fn region_stats_match_pixelwise_sums() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        for _ in 0..20 {
+            let n = rng.random_range(1..400usize);
+            let max = rng.random_range(1..6u32);
+            // Runs of equal labels, including 0.
+            let mut labels = Vec::with_capacity(n);
+            while labels.len() < n {
+                let l = rng.random_range(0..=max);
+                let run = rng.random_range(1..8usize);
+                labels.extend(std::iter::repeat_n(l, run.min(n - labels.len())));
+            }
+            let pts: Vec<[f32; 4]> = (0..n)
+                .map(|_| {
+                    [
+                        rng.random_range(-500.0..500.0),
+                        rng.random_range(-500.0..500.0),
+                        rng.random_range(0.0..300.0),
+                        0.0,
+                    ]
+                })
+                .collect();
+            let k: Vec<f32> =
+                (0..n).map(|i| if i % 7 == 3 { f32::NAN } else { rng.random_range(-0.1..0.1) }).collect();
+            let st = region_stats(&labels, max, &pts, &k);
+            for l in 1..=max {
+                let mut r = Stats { first: u32::MAX, ..Stats::default() };
+                for i in (0..n).filter(|&i| labels[i] == l) {
+                    if r.count == 0 {
+                        r.first = i as u32;
+                    }
+                    r.count += 1;
+                    if k[i].is_finite() {
+                        r.sum_k += f64::from(k[i]);
+                        r.n_k += 1;
+                    }
+                    r.mom.add([f64::from(pts[i][0]), f64::from(pts[i][1]), f64::from(pts[i][2])]);
+                }
+                let s = &st[l as usize];
+                assert_eq!((s.count, s.n_k, s.first), (r.count, r.n_k, r.first));
+                assert_eq!(s.sum_k.to_bits(), r.sum_k.to_bits());
+                assert_eq!(s.mom, r.mom);
+            }
+        }
     }
 }

@@ -283,3 +283,67 @@ fn seed_window_rejects_noisy_seeds() {
     assert!(!seg.regions.is_empty());
     assert!(Params { seed_stride_px: 0, ..Params::default() }.validate().is_err());
 }
+
+/// The pre-optimisation `borders`, pixel by pixel with explicit bounds: the reference of the
+/// row-slice version.
+fn borders_reference(labels: &LabelImage, one_sided: bool) -> Vec<bool> {
+    let (w, h) = labels.dimensions();
+    let (w, h) = (w as usize, h as usize);
+    let l = labels.as_slice();
+    (0..w * h)
+        .map(|i| {
+            let (x, y, a) = (i % w, i / w, l[i]);
+            if a == 0 {
+                return false;
+            }
+            let right = (x + 1 < w).then(|| l[i + 1]);
+            let down = (y + 1 < h).then(|| l[i + w]);
+            let left = (x > 0).then(|| l[i - 1]);
+            let up = (y > 0).then(|| l[i - w]);
+            if one_sided {
+                [right, down].into_iter().flatten().any(|b| b != a)
+                    || [left, up].into_iter().flatten().any(|b| b == 0)
+            } else {
+                [right, down, left, up].into_iter().flatten().any(|b| b != a)
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn borders_match_the_reference_on_random_labels() {
+    use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+    for case in 0..200 {
+        let (w, h) = (rng.random_range(1..12u32), rng.random_range(1..12u32));
+        // Few labels so that equal neighbours are common.
+        let n_labels = rng.random_range(1..4u32);
+        let labels = Grid::from_fn(w, h, |_, _| rng.random_range(0..=n_labels));
+        for one_sided in [false, true] {
+            assert_eq!(
+                borders(&labels, one_sided).as_slice(),
+                borders_reference(&labels, one_sided).as_slice(),
+                "case {case}, one_sided {one_sided}: {labels:?}"
+            );
+        }
+    }
+}
+
+/// The pinhole camera takes the general geometry path: it grows regions, keeps no-data at 0 and
+/// is reproducible.
+#[test]
+fn pinhole_camera_grows_regions() {
+    let s = box_scene();
+    let cam = Camera::Pinhole { fx: 60.0, fy: 60.0, cx: 32.0, cy: 32.0, depth_scale: 1.0 };
+    let params = Params { max_residual: 1.0, fill_max_residual: 1.0, ..small_params() };
+    let (seg, info) = grow(&s.range, &s.features, &cam, &params, 1);
+    assert!(info.n_regions >= 1, "{info:?}");
+    assert_eq!(seg.regions.len() as u32, info.n_regions);
+    for (x, y, v) in s.range.enumerate() {
+        if v.is_nan() {
+            assert_eq!(seg.labels[(x, y)], 0);
+        }
+    }
+    let (again, _) = grow(&s.range, &s.features, &cam, &params, 1);
+    assert_eq!(again.labels, seg.labels);
+}
