@@ -42,6 +42,17 @@ fn relax(b: divan::Bencher, side: u32) {
     b.bench(|| relax::relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 0));
 }
 
+/// `regions` mode as the pipeline runs it: region-growing labels (here the 8×8 cells) as guide.
+#[divan::bench(args = [512])]
+fn final_segmentation_regions(b: divan::Bencher, side: u32) {
+    let c = case(side);
+    let cell = side / 8;
+    let range: RangeImage = Grid::from_fn(side, side, |x, y| 100.0 + ((x / cell) * 3 + (y / cell)) as f32);
+    let guide = Grid::from_fn(side, side, |x, y| 1 + (x / cell) + 8 * (y / cell));
+    let params = relax::SegmentParams::default();
+    b.bench(|| relax::final_segmentation(&range, &rangeimage::Camera::ABW0, &c.c2, Some(&guide), &params));
+}
+
 #[divan::bench(args = [512])]
 fn final_segmentation(b: divan::Bencher, side: u32) {
     let c = case(side);

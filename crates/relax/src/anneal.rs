@@ -2,8 +2,16 @@
 //!
 //! Moves hit random places of the image, so the state is laid out for few cache misses: one
 //! byte of flags per cell (valid, C2 occupied), one `u16` per cell that is both the C1
-//! occupancy and the cached nearest-C2 squared distance of the C1 point there, and the two
-//! strengths interleaved as `[f32; 2]`.
+//! occupancy and the cached nearest-C2 squared distance of the C1 point there, and one `f32`
+//! array per strength. [`State::sweep`] draws its moves a few steps ahead and reads the cells
+//! they will need early, so the cache misses of consecutive moves overlap.
+//!
+//! A C2 move from a to b can change the cached distance only of C1 points within the cap of a
+//! or b. Per direction, a window of `2·⌊cap⌋ + 2` rows by a multiple of 16 columns covers both
+//! disks, with precomputed squared distances to a and to b; each window row is first tested
+//! branch-free (vectorised) for a cell that may change ([`affected`]), and only the rare rows
+//! that have one are examined cell by cell. A C1 move searches the nearest C2 point around b,
+//! starting from the lower bound `(d(a) − |b − a|)²` implied by the cached distance at a.
 
 use rand::RngExt;
 use rand::rngs::Xoshiro256PlusPlus;
@@ -51,11 +59,72 @@ impl DistanceTerm {
     }
 }
 
+/// Per move direction: the `win_h × win_w` window (row-major) that covers the disks of radius
+/// `cap` around both the source a and the target b of a C2 move, as squared distances to a
+/// and to b (`FAR_A` / `FAR16` outside the respective disk), so the cells whose cached
+/// distance may change are found by branch-free, vectorisable row scans.
+#[derive(Default)]
+struct Window {
+    /// Linear offset of the window's top-left cell relative to a.
+    origin: isize,
+    /// Squared distance to a, or `FAR_A` beyond the cap.
+    da: Vec<u16>,
+    /// Squared distance to b, or `FAR16` beyond the cap.
+    db: Vec<u16>,
+}
+
+/// `Window::da` value beyond the cap (never equal to a `c1d2` value).
+const FAR_A: u16 = u16::MAX - 3;
+/// Window width granularity (cells per vector chunk).
+const LANES: usize = 16;
+/// How many moves ahead [`State::sweep`] draws and prefetches.
+const LOOK: usize = 16;
+
+/// Whether a C1 cell with cached squared distance `old` may change when the C2 point at squared
+/// distance `da` moves to squared distance `db`: b is strictly closer, or the moved point was
+/// at the cached distance (and b is not at the same distance).
+#[inline(always)]
+fn affected(old: u16, da: u16, db: u16) -> bool {
+    (old != EMPTY) & (db < old) | (old == da) & (db != old)
+}
+
+/// Whether any cell of a window row is [`affected`] (branch-free over 16-cell chunks).
+#[inline(always)]
+fn row_hit(old: &[u16], da: &[u16], db: &[u16]) -> bool {
+    let mut acc = [false; LANES];
+    for ((o, a), b) in old.chunks_exact(LANES).zip(da.chunks_exact(LANES)).zip(db.chunks_exact(LANES)) {
+        for j in 0..LANES {
+            acc[j] |= affected(o[j], a[j], b[j]);
+        }
+    }
+    acc.iter().fold(false, |x, &y| x | y)
+}
+
+/// Squared distance from padded cell `p` to the nearest C2 point (`OCC2` in `flags`) within the
+/// cap, or `FAR16`, when none is known to be closer than squared distance `from`.
+#[inline]
+fn nearest_in(flags: &[u8], disk: &[(isize, u16)], start: &[u32], p: usize, from: u16) -> u16 {
+    for &(off, d2) in &disk[start[usize::from(from)] as usize..] {
+        if flags[(p as isize + off) as usize] & OCC2 != 0 {
+            return d2;
+        }
+    }
+    FAR16
+}
+
+/// `u < exp(−x)` for `x ≥ 0` and `u` a multiple of 2⁻⁵³ in [0, 1) (as `rand` samples f64): for
+/// `x > 37`, `exp(−x) < 2⁻⁵³`, so only `u = 0` can pass and `exp` is evaluated only then.
+#[inline]
+fn metropolis(u: f64, x: f64) -> bool {
+    if x > 37.0 { u == 0.0 && (-x).exp() > 0.0 } else { u < (-x).exp() }
+}
+
 /// The mutable annealing state on a padded grid (pad cells are invalid, so a move can never
 /// leave the image and window scans need no bounds checks).
 pub(crate) struct State {
     w: usize,
     h: usize,
+    /// Left and top padding (cells); the right padding is wider so whole window rows fit.
     pad: usize,
     pw: usize,
     /// `VALID | OCC2` bits per padded cell.
@@ -63,19 +132,26 @@ pub(crate) struct State {
     /// Per padded cell: `EMPTY`, or the capped squared distance from the C1 point there to the
     /// nearest C2 point (`FAR16` beyond the cap).
     c1d2: Vec<u16>,
-    /// `[s1, |∇|]` per padded cell (values exactly representable in f32).
-    vals: Vec<[f32; 2]>,
+    /// `[s1, |∇|]`: one array per strength over the padded cells (C1 moves read the first,
+    /// C2 moves the second).
+    vals: [Vec<f32>; 2],
     /// Padded linear positions: `[0, n1)` are C1 points, `[n1, len)` C2 points.
     pub(crate) pos: Vec<u32>,
     n1: usize,
-    /// Offsets within the cap, sorted by squared distance: (linear delta, d², dx, dy).
-    disk: Vec<(isize, u16, i32, i32)>,
+    /// Offsets within the cap, sorted by squared distance: (linear delta, d²).
+    disk: Vec<(isize, u16)>,
     /// `start[d]` = index of the first `disk` entry with squared distance ≥ d (d ≤ cap2 + 1).
     start: Vec<u32>,
-    nbr: [(isize, i32, i32); 8],
-    /// Per move direction: the offsets (relative to the target b) of the disk around b that
-    /// are outside the disk around the source a, with their squared distance to b.
-    fresh: [Vec<(isize, u16)>; 8],
+    /// Linear offset of each of the 8 move directions.
+    nbr: [isize; 8],
+    /// Per move direction: lower bound on the squared distance from b to C2 given the cached
+    /// one at a (`lower[dir][d²]`, index `cap2 + 1` for `FAR16`), from `|b − a| ≤ √2`.
+    lower: [Vec<u16>; 8],
+    /// Per move direction: the C2-move window.
+    win: [Window; 8],
+    /// Window width (a multiple of `LANES`) and height.
+    win_w: usize,
+    win_h: usize,
     term: DistanceTerm,
     lambda: f64,
     /// Running Σ over C1 of the distance term.
@@ -86,26 +162,54 @@ pub(crate) struct State {
     ab: f64,
     /// Pending (padded cell, new d²) updates of the last C2 proposal.
     scratch: Vec<(u32, u16)>,
+    /// New d² of the C1 point of the last C1 proposal.
+    pending: u16,
 }
 
 impl State {
-    /// Builds the state from (already pruned) edge maps and sanitised, scaled s1 / magnitude
-    /// (values must be exactly representable in f32).
+    /// Builds the state from (already pruned) edge maps and sanitised, scaled s1 / magnitude,
+    /// with A + B = `ab` (tests: the building blocks of [`crate::relax`] one by one).
+    #[cfg(test)]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         c1: &EdgeMap,
         c2: &EdgeMap,
-        s1: &Grid<f64>,
-        mag: &Grid<f64>,
+        s1: &Grid<f32>,
+        mag: &Grid<f32>,
         valid: &Grid<bool>,
         term: DistanceTerm,
         lambda: f64,
         ab: f64,
     ) -> Self {
+        let mut st = Self::scaled(c1, c2, [s1, mag], [1.0, 1.0], valid, term, lambda);
+        st.ab = ab;
+        st.ext_sum = ab;
+        st
+    }
+
+    /// Builds the state from (already pruned) edge maps and the raw strengths `[s1, |∇|]`:
+    /// non-finite values count as 0, and each strength is divided by its `divisor` in f64 and
+    /// rounded to f32 (a divisor of 1 keeps the values). A + B is the sum of the stored
+    /// strengths over the initial points, C1 in raster order then C2 in raster order.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn scaled(
+        c1: &EdgeMap,
+        c2: &EdgeMap,
+        strengths: [&Grid<f32>; 2],
+        divisor: [f64; 2],
+        valid: &Grid<bool>,
+        term: DistanceTerm,
+        lambda: f64,
+    ) -> Self {
+        let [s1, mag] = strengths;
         let (w, h) = (c1.width() as usize, c1.height() as usize);
         let r = term.cap.floor() as usize;
         let pad = r + 1;
-        let pw = w + 2 * pad;
+        let win_w = (2 * r + 2).div_ceil(LANES) * LANES;
+        let win_h = 2 * r + 2;
+        // A window starts at most r + 1 left of a and spans win_w cells.
+        let pad_right = (win_w - r).max(pad);
+        let pw = w + pad + pad_right;
         let ph = h + 2 * pad;
         let mut st = Self {
             w,
@@ -114,73 +218,99 @@ impl State {
             pw,
             flags: vec![0; pw * ph],
             c1d2: vec![EMPTY; pw * ph],
-            vals: vec![[0.0; 2]; pw * ph],
+            vals: [vec![0.0; pw * ph], vec![0.0; pw * ph]],
             pos: Vec::new(),
             n1: 0,
             disk: Vec::new(),
             start: Vec::new(),
-            nbr: [(0, 0, 0); 8],
-            fresh: Default::default(),
+            nbr: [0; 8],
+            lower: Default::default(),
+            win: Default::default(),
+            win_w,
+            win_h,
             term,
             lambda,
             e_int: 0.0,
-            ext_sum: ab,
-            ab,
+            ext_sum: 0.0,
+            ab: 0.0,
             scratch: Vec::new(),
+            pending: 0,
         };
         let ri = r as i32;
+        let cap2 = st.term.cap2 as i32;
+        let mut disk = Vec::new();
         for dy in -ri..=ri {
             for dx in -ri..=ri {
-                let d2 = (dx * dx + dy * dy) as u32;
-                if d2 <= st.term.cap2 {
-                    st.disk.push((dy as isize * pw as isize + dx as isize, d2 as u16, dx, dy));
+                let d2 = dx * dx + dy * dy;
+                if d2 <= cap2 {
+                    disk.push((d2, dy, dx));
                 }
             }
         }
-        st.disk.sort_by_key(|&(_, d2, dx, dy)| (d2, dy, dx));
+        disk.sort_unstable();
+        st.disk =
+            disk.iter().map(|&(d2, dy, dx)| (dy as isize * pw as isize + dx as isize, d2 as u16)).collect();
         st.start = (0..=st.term.cap2 + 1)
             .map(|d| st.disk.iter().position(|e| u32::from(e.1) >= d).unwrap_or(st.disk.len()) as u32)
             .collect();
         let mut k = 0;
-        for dy in -1i32..=1 {
-            for dx in -1i32..=1 {
-                if dx != 0 || dy != 0 {
-                    st.nbr[k] = (dy as isize * pw as isize + dx as isize, dx, dy);
-                    k += 1;
+        for my in -1i32..=1 {
+            for mx in -1i32..=1 {
+                if mx == 0 && my == 0 {
+                    continue;
+                }
+                st.nbr[k] = my as isize * pw as isize + mx as isize;
+                let step = f64::from(mx * mx + my * my).sqrt();
+                st.lower[k] = (0..=cap2 + 1)
+                    .map(|d2| {
+                        let d = f64::from(d2).sqrt() - step;
+                        if d <= 0.0 { 0 } else { (d * d - 1e-9).ceil().max(0.0) as u16 }
+                    })
+                    .collect();
+                let (x0, y0) = (-ri + mx.min(0), -ri + my.min(0));
+                let mut win = Window { origin: y0 as isize * pw as isize + x0 as isize, ..Window::default() };
+                for wy in 0..win_h as i32 {
+                    for wx in 0..win_w as i32 {
+                        let (dx, dy) = (x0 + wx, y0 + wy);
+                        let da2 = dx * dx + dy * dy;
+                        let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
+                        win.da.push(if da2 <= cap2 { da2 as u16 } else { FAR_A });
+                        win.db.push(if db2 <= cap2 { db2 as u16 } else { FAR16 });
+                    }
+                }
+                st.win[k] = win;
+                k += 1;
+            }
+        }
+        for (y, ((vrow, srow), mrow)) in valid
+            .as_slice()
+            .chunks_exact(w.max(1))
+            .zip(s1.as_slice().chunks_exact(w.max(1)))
+            .zip(mag.as_slice().chunks_exact(w.max(1)))
+            .enumerate()
+        {
+            let p0 = st.padded(0, y);
+            for (f, &v) in st.flags[p0..p0 + w].iter_mut().zip(vrow) {
+                *f = if v { VALID } else { 0 };
+            }
+            for (k, src) in [srow, mrow].into_iter().enumerate() {
+                let div = divisor[k];
+                for (d, &v) in st.vals[k][p0..p0 + w].iter_mut().zip(src) {
+                    *d = (f64::from(if v.is_finite() { v } else { 0.0 }) / div) as f32;
                 }
             }
         }
-        for dir in 0..8 {
-            let (_, mx, my) = st.nbr[dir];
-            let cap2 = st.term.cap2 as i32;
-            st.fresh[dir] = st
-                .disk
-                .iter()
-                .filter(|&&(_, _, dx, dy)| (dx + mx) * (dx + mx) + (dy + my) * (dy + my) > cap2)
-                .map(|&(o, d2, _, _)| (o, d2))
-                .collect();
-        }
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let p = st.padded(x, y);
-                st.flags[p] = if valid.as_slice()[i] { VALID } else { 0 };
-                st.vals[p] = [s1.as_slice()[i] as f32, mag.as_slice()[i] as f32];
-                debug_assert_eq!(f64::from(st.vals[p][0]), s1.as_slice()[i]);
-                if c1.as_slice()[i] {
-                    st.pos.push(p as u32);
-                }
-            }
+        for (y, row) in c1.as_slice().chunks_exact(w.max(1)).enumerate() {
+            let p0 = st.padded(0, y);
+            crate::for_each_set(row, |x| st.pos.push((p0 + x) as u32));
         }
         st.n1 = st.pos.len();
-        for y in 0..h {
-            for x in 0..w {
-                if c2.as_slice()[y * w + x] {
-                    let p = st.padded(x, y);
-                    st.flags[p] |= OCC2;
-                    st.pos.push(p as u32);
-                }
-            }
+        for (y, row) in c2.as_slice().chunks_exact(w.max(1)).enumerate() {
+            let p0 = st.padded(0, y);
+            crate::for_each_set(row, |x| {
+                st.flags[p0 + x] |= OCC2;
+                st.pos.push((p0 + x) as u32);
+            });
         }
         let mut e_int = 0.0;
         for k in 0..st.n1 {
@@ -190,6 +320,12 @@ impl State {
             e_int += st.term.value16(d);
         }
         st.e_int = e_int;
+        let mut ab = 0.0;
+        for (k, &p) in st.pos.iter().enumerate() {
+            ab += f64::from(st.vals[usize::from(k >= st.n1)][p as usize]);
+        }
+        st.ab = ab;
+        st.ext_sum = ab;
         st
     }
 
@@ -218,12 +354,7 @@ impl State {
     /// (`from ≤ cap2`): the search skips the disk entries below it.
     #[inline]
     fn nearest_from(&self, p: usize, from: u16) -> u16 {
-        for &(off, d2, _, _) in &self.disk[self.start[usize::from(from)] as usize..] {
-            if self.flags[(p as isize + off) as usize] & OCC2 != 0 {
-                return d2;
-            }
-        }
-        FAR16
+        nearest_in(&self.flags, &self.disk, &self.start, p, from)
     }
 
     /// Full recomputation of (Eⁱ, Eᵉ) for the points at padded positions `pos` (same point
@@ -236,13 +367,13 @@ impl State {
         let nearest = |p: usize| {
             self.disk
                 .iter()
-                .find(|&&(off, _, _, _)| occ2[(p as isize + off) as usize])
+                .find(|&&(off, _)| occ2[(p as isize + off) as usize])
                 .map_or(NONE, |d| u32::from(d.1))
         };
         let e_int: f64 = pos[..self.n1].iter().map(|&p| self.term.value(nearest(p as usize))).sum();
         let mut ext = 0.0;
         for (k, &p) in pos.iter().enumerate() {
-            ext += f64::from(self.vals[p as usize][usize::from(k >= self.n1)]);
+            ext += f64::from(self.vals[usize::from(k >= self.n1)][p as usize]);
         }
         (e_int, self.ab - ext)
     }
@@ -254,64 +385,65 @@ impl State {
     #[inline]
     fn propose(&mut self, i: usize, dir: usize) -> Option<(f64, f64)> {
         let a = self.pos[i] as usize;
-        let (off, mx, my) = self.nbr[dir];
-        let b = (a as isize + off) as usize;
+        let b = (a as isize + self.nbr[dir]) as usize;
         let fb = self.flags[b];
         if fb & VALID == 0 {
             return None;
         }
-        self.scratch.clear();
-        if i < self.n1 {
+        let set = usize::from(i >= self.n1);
+        // Read the strengths first: they are likely cache misses, which then overlap the scan.
+        let d_ext = f64::from(self.vals[set][b]) - f64::from(self.vals[set][a]);
+        if set == 0 {
             if self.c1d2[b] != EMPTY {
                 return None;
             }
             let old = self.c1d2[a];
-            let new = self.nearest(b);
+            // Cached values are ≤ cap2 or FAR16 (which `lower` holds at index cap2 + 1).
+            let li = if old == FAR16 { self.term.cap2 as usize + 1 } else { usize::from(old) };
+            let from = self.lower[dir][li];
+            let new = nearest_in(&self.flags, &self.disk, &self.start, b, from);
+            self.pending = new;
             let d_int = self.term.value16(new) - self.term.value16(old);
-            Some((d_int, f64::from(self.vals[b][0]) - f64::from(self.vals[a][0])))
+            Some((d_int, d_ext))
         } else {
             if fb & OCC2 != 0 {
                 return None;
             }
             self.flags[a] &= !OCC2;
             self.flags[b] |= OCC2;
-            let cap2 = self.term.cap2 as i32;
+            self.scratch.clear();
+            let (ww, pw) = (self.win_w, self.pw);
+            let win = &self.win[dir];
+            let base = (a as isize + win.origin) as usize;
             let mut d_int = 0.0;
-            for j in 0..self.disk.len() {
-                let (o, da2, dx, dy) = self.disk[j];
-                let p = (a as isize + o) as usize;
-                let old = self.c1d2[p];
-                if old == EMPTY {
+            for k in 0..self.win_h {
+                let row = base + k * pw;
+                let old = &self.c1d2[row..row + ww];
+                let da = &win.da[k * ww..(k + 1) * ww];
+                let db = &win.db[k * ww..(k + 1) * ww];
+                if !row_hit(old, da, db) {
                     continue;
                 }
-                let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
-                let new = if db2 <= cap2 && (db2 as u16) <= old {
-                    // b is at least as close as the old nearest: nothing else can be closer.
-                    db2 as u16
-                } else if old == da2 {
-                    // The moved point may have been the (only) nearest; every other C2 point is
-                    // at squared distance ≥ old, so search from there.
-                    self.nearest_from(p, old)
-                } else {
-                    old
-                };
-                if new != old {
-                    self.scratch.push((p as u32, new));
-                    d_int += self.term.value16(new) - self.term.value16(old);
+                for j in 0..ww {
+                    let (o, a2, b2) = (old[j], da[j], db[j]);
+                    if !affected(o, a2, b2) {
+                        continue;
+                    }
+                    let new = if b2 < o {
+                        // b is closer than the old nearest: nothing else can be closer.
+                        b2
+                    } else {
+                        // The moved point was a nearest one; every other C2 point is at squared
+                        // distance ≥ old, so search from there.
+                        nearest_in(&self.flags, &self.disk, &self.start, row + j, o)
+                    };
+                    if new != o {
+                        self.scratch.push(((row + j) as u32, new));
+                        d_int += self.term.value16(new) - self.term.value16(o);
+                    }
                 }
             }
-            // C1 points newly within the cap of b (those near a were handled above).
-            for j in 0..self.fresh[dir].len() {
-                let (o, db2) = self.fresh[dir][j];
-                let p = (b as isize + o) as usize;
-                let old = self.c1d2[p];
-                if old == EMPTY || db2 >= old {
-                    continue;
-                }
-                self.scratch.push((p as u32, db2));
-                d_int += self.term.value16(db2) - self.term.value16(old);
-            }
-            Some((d_int, f64::from(self.vals[b][1]) - f64::from(self.vals[a][1])))
+            Some((d_int, d_ext))
         }
     }
 
@@ -319,10 +451,10 @@ impl State {
     #[inline]
     fn commit(&mut self, i: usize, dir: usize, d_int: f64, d_ext: f64) {
         let a = self.pos[i] as usize;
-        let b = (a as isize + self.nbr[dir].0) as usize;
+        let b = (a as isize + self.nbr[dir]) as usize;
         if i < self.n1 {
             self.c1d2[a] = EMPTY;
-            self.c1d2[b] = self.nearest(b);
+            self.c1d2[b] = self.pending;
         } else {
             for &(p, new) in &self.scratch {
                 self.c1d2[p as usize] = new;
@@ -338,22 +470,72 @@ impl State {
     fn revert(&mut self, i: usize, dir: usize) {
         if i >= self.n1 {
             let a = self.pos[i] as usize;
-            let b = (a as isize + self.nbr[dir].0) as usize;
+            let b = (a as isize + self.nbr[dir]) as usize;
             self.flags[b] &= !OCC2;
             self.flags[a] |= OCC2;
         }
     }
 
-    /// Tries one random move at temperature `t`; returns whether it was accepted.
+    /// One sweep of `n` random moves at temperature `t`; returns the number accepted. Moves
+    /// (point, direction) come from `moves`, the Metropolis coins from `coins`. The moves are
+    /// drawn `LOOK` steps ahead and the memory they will touch is read early, so the cache
+    /// misses of several moves overlap (the `LOOK` moves still pending at the end of the sweep
+    /// are dropped, so the stream is a fixed function of the seeds and the sweep lengths).
+    pub(crate) fn sweep(
+        &mut self,
+        moves: &mut Xoshiro256PlusPlus,
+        coins: &mut Xoshiro256PlusPlus,
+        t: f64,
+        n: usize,
+    ) -> u64 {
+        let len = self.pos.len() as u32;
+        if len == 0 {
+            return 0;
+        }
+        let mut draw = || (moves.random_range(0..len) as usize, moves.random_range(0..8u32) as usize);
+        let mut ring = [(0usize, 0usize); LOOK];
+        for r in &mut ring {
+            *r = draw();
+        }
+        let mut accepted = 0;
+        for k in 0..n {
+            let (i, dir) = ring[k % LOOK];
+            let next = draw();
+            ring[k % LOOK] = next;
+            self.touch(next.0, next.1);
+            accepted += u64::from(self.attempt(i, dir, coins, t));
+        }
+        accepted
+    }
+
+    /// Reads the cells a future move of point `i` by `dir` will read (a software prefetch).
     #[inline]
+    fn touch(&self, i: usize, dir: usize) {
+        let a = self.pos[i] as usize;
+        let b = (a as isize + self.nbr[dir]) as usize;
+        std::hint::black_box((self.vals[usize::from(i >= self.n1)][b], self.flags[b], self.c1d2[b]));
+    }
+
+    /// Tries one random move at temperature `t`; returns whether it was accepted (tests: the
+    /// single-stream form of [`State::sweep`]).
+    #[cfg(test)]
     pub(crate) fn step(&mut self, rng: &mut Xoshiro256PlusPlus, t: f64) -> bool {
         let i = rng.random_range(0..self.pos.len() as u32) as usize;
         let dir = rng.random_range(0..8u32) as usize;
+        let mut coins = rng.clone();
+        let accept = self.attempt(i, dir, &mut coins, t);
+        *rng = coins;
+        accept
+    }
+
+    /// Tries moving point `i` by `dir` at temperature `t` (coin from `coins` if uphill).
+    #[inline]
+    fn attempt(&mut self, i: usize, dir: usize, rng: &mut Xoshiro256PlusPlus, t: f64) -> bool {
         let Some((d_int, d_ext)) = self.propose(i, dir) else {
             return false;
         };
         let de = d_int - self.lambda * d_ext;
-        let accept = de < 0.0 || rng.random::<f64>() < (-de / t).exp();
+        let accept = de < 0.0 || metropolis(rng.random::<f64>(), de / t);
         if accept {
             self.commit(i, dir, d_int, d_ext);
         } else {
@@ -403,5 +585,37 @@ impl State {
         let occupied = self.c1d2.iter().filter(|&&d| d != EMPTY).count();
         occupied == self.n1
             && self.pos[..self.n1].iter().all(|&p| self.c1d2[p as usize] == self.nearest(p as usize))
+    }
+
+    /// The stored `[s1, |∇|]` of every padded cell and A + B (tests only).
+    #[cfg(test)]
+    pub(crate) fn strengths(&self) -> (&[Vec<f32>; 2], f64) {
+        (&self.vals, self.ab)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn metropolis_shortcut_matches_exp() {
+        // rand samples f64 in [0, 1) as multiples of 2⁻⁵³, which the shortcut relies on.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let unit = 2f64.powi(-53);
+        for _ in 0..10_000 {
+            let u: f64 = rng.random();
+            assert_eq!((u / unit).fract(), 0.0, "{u} is not a multiple of 2^-53");
+        }
+        let mut us: Vec<f64> = (0..4).map(|k| f64::from(k) * unit).collect();
+        us.extend((0..200).map(|_| rng.random::<f64>()));
+        let mut xs: Vec<f64> = (0..400).map(|k| f64::from(k) * 0.25).collect();
+        xs.extend([36.0, 36.7, 36.9, 37.0, 37.0 + 1e-12, 37.5, 745.0, 1e300, f64::INFINITY]);
+        for &x in &xs {
+            for &u in &us {
+                assert_eq!(metropolis(u, x), u < (-x).exp(), "u {u}, x {x}");
+            }
+        }
     }
 }

@@ -22,7 +22,9 @@
 //! **Annealing.** A move picks a uniformly random point of C1 ∪ C2 and a uniformly random
 //! 8-neighbour; it is rejected (counted as tried, not accepted) if the target is outside the
 //! image, invalid, or occupied by a point of the same set. Metropolis acceptance: `ΔE < 0` or
-//! `u < exp(−ΔE/T)` (so ΔE = 0 moves are always accepted). `T ← (1 − δ)·T` after every sweep of
+//! `u < exp(−ΔE/T)` (so ΔE = 0 moves are always accepted). Moves and the Metropolis coins `u`
+//! come from two Xoshiro256++ streams, both seeded from `seed`, so the moves can be drawn (and
+//! their memory fetched) a few steps ahead. `T ← (1 − δ)·T` after every sweep of
 //! `|C1 ∪ C2|` attempts. If `t0 = 0` the initial temperature is automatic: the mean positive ΔE
 //! of `min(|C1 ∪ C2|, 1000)` trial moves (evaluated, never applied) divided by
 //! `ln(1 / auto_t0_acceptance)`, so an average uphill move is accepted with probability
@@ -69,10 +71,9 @@ pub struct Params {
 }
 
 /// Defaults: `t_d_px` and `lambda` were picked by `cargo xtask tune` on the synthetic training split
-/// (objective `hoover_correct` of the whole pipeline, see `configs/tune.toml`); the schedule
-/// on the 512×512 bench case: the lowest energy within a 50 ms budget (7 sweeps at δ = 0.7
-/// reach E 23426 → 8601 there; the former δ = 0.3 / 20-sweep schedule ran 18 sweeps to 7518 in
-/// about three times the time; colder is better here, δ = 0.5 needs 8 sweeps for 8473).
+/// (objective `hoover_correct` of the whole pipeline, see `configs/tune.toml`); the schedule (7 sweeps,
+/// δ = 0.7, starting temperature from the acceptance target) was chosen on the 512×512 bench case as
+/// the lowest energy reached within the 50 ms budget.
 impl Default for Params {
     fn default() -> Self {
         Self {
@@ -187,84 +188,104 @@ pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
 }
 
 /// The points of `query` at Euclidean distance ≤ `t_px` from a point of `mask` (exact: the
-/// same decision as thresholding the squared EDT of `mask`, but only O(pixels + |query|·t)).
-/// Per row, the horizontal distance to the nearest mask pixel by two sweeps; a query pixel is
-/// kept if `hd(x, y + dy)² + dy² ≤ t²` for some `|dy| ≤ t`.
+/// same decision as thresholding the squared EDT of `mask`, but only O(pixels / 64 + |query|·t)).
+/// The mask is packed into one bitset per row; a query pixel (x, y) is kept if for some
+/// `|dy| ≤ t` row `y + dy` has a mask bit within `x ± rx(dy)`, `rx(dy)` the largest integer with
+/// `rx² + dy² ≤ t²`. Rows are tried nearest first, so most queries stop after one or two.
 fn within(query: &EdgeMap, mask: &EdgeMap, t_px: f64) -> EdgeMap {
     let (w, h) = (mask.width() as usize, mask.height() as usize);
-    let m = mask.as_slice();
-    let big = (w + 1) as u32;
-    let mut hd = vec![big; w * h];
-    for y in 0..h {
-        let row = &mut hd[y * w..(y + 1) * w];
-        let mr = &m[y * w..(y + 1) * w];
-        let mut d = big;
-        for x in 0..w {
-            d = if mr[x] { 0 } else { (d + 1).min(big) };
-            row[x] = d;
-        }
-        let mut d = big;
-        for x in (0..w).rev() {
-            d = if mr[x] { 0 } else { (d + 1).min(big) };
-            row[x] = row[x].min(d);
+    let words = w.div_ceil(64);
+    let mut bits = vec![0u64; words * h];
+    for (brow, mrow) in bits.chunks_exact_mut(words.max(1)).zip(mask.as_slice().chunks_exact(w.max(1))) {
+        for (word, chunk) in brow.iter_mut().zip(mrow.chunks(64)) {
+            *word = chunk.iter().enumerate().fold(0u64, |acc, (j, &b)| acc | (u64::from(b) << j));
         }
     }
-    let t2 = t_px * t_px;
-    let r = t_px.floor() as usize;
+    let rx = edt::reach(t_px);
+    let r = rx.len() - 1;
+    // Whether row `y` of `bits` has a set bit in columns lo..=hi.
+    let any = |y: usize, lo: usize, hi: usize| {
+        let row = &bits[y * words..(y + 1) * words];
+        let (wl, wh) = (lo / 64, hi / 64);
+        let lo_mask = u64::MAX << (lo % 64);
+        let hi_mask = u64::MAX >> (63 - hi % 64);
+        if wl == wh {
+            return row[wl] & lo_mask & hi_mask != 0;
+        }
+        row[wl] & lo_mask != 0 || row[wl + 1..wh].iter().any(|&v| v != 0) || row[wh] & hi_mask != 0
+    };
     let mut out = query.clone();
-    for y in 0..h {
-        let (lo, hi) = (y.saturating_sub(r), (y + r).min(h - 1));
-        for x in 0..w {
-            let i = y * w + x;
-            if !out.as_slice()[i] {
-                continue;
-            }
-            let keep = (lo..=hi).any(|yy| {
-                let d = hd[yy * w + x];
-                let dy = yy.abs_diff(y) as f64;
-                d < big && f64::from(d) * f64::from(d) + dy * dy <= t2
-            });
-            out.as_mut_slice()[i] = keep;
-        }
-    }
+    let o = out.as_mut_slice();
+    for_each_set(query.as_slice(), |i| {
+        let (x, y) = (i % w, i / w);
+        o[i] = (0..=r).any(|dy| {
+            let (lo, hi) = (x.saturating_sub(rx[dy]), (x + rx[dy]).min(w - 1));
+            (dy <= y && any(y - dy, lo, hi)) || (dy > 0 && y + dy < h && any(y + dy, lo, hi))
+        });
+    });
     out
 }
 
-/// `values` as f64 with non-finite values set to 0, divided by their mean over `set` if
-/// `normalize` and that mean is positive.
-fn scaled(values: &Grid<f32>, set: &EdgeMap, normalize: bool) -> Grid<f64> {
-    let mut g = values.map(|&v| if v.is_finite() { f64::from(v) } else { 0.0 });
-    // Values are rounded to f32 after scaling, so the annealing state can store them in f32
-    // with exactly the values this function returns.
-    if normalize {
-        let (mut sum, mut n) = (0.0f64, 0u64);
-        for (&v, &e) in g.as_slice().iter().zip(set.as_slice()) {
-            if e {
-                sum += v;
-                n += 1;
+/// Calls `f(i)` for every `i` with `mask[i]`, in increasing order; 32-wide all-false blocks are
+/// skipped after one branch-free test (edge maps are sparse).
+#[inline]
+pub(crate) fn for_each_set(mask: &[bool], mut f: impl FnMut(usize)) {
+    let mut chunks = mask.chunks_exact(32);
+    let mut base = 0;
+    for c in &mut chunks {
+        if c.iter().fold(false, |a, &b| a | b) {
+            for (k, &b) in c.iter().enumerate() {
+                if b {
+                    f(base + k);
+                }
             }
         }
-        let mean = if n > 0 { sum / n as f64 } else { 0.0 };
-        if mean > 0.0 && mean.is_finite() {
-            for v in g.as_mut_slice() {
-                *v = f64::from((*v / mean) as f32);
-            }
+        base += 32;
+    }
+    for (k, &b) in chunks.remainder().iter().enumerate() {
+        if b {
+            f(base + k);
         }
     }
-    g
+}
+
+/// `values` with non-finite values set to 0, divided by their mean over `set` if `normalize`
+/// and that mean (computed in f64) is positive; the quotients are rounded to f32, so the
+/// annealing state stores exactly these values.
+fn scaled(values: &Grid<f32>, set: &EdgeMap, normalize: bool) -> Grid<f32> {
+    let div = divisor(values, set, normalize);
+    values.map(|&v| (f64::from(if v.is_finite() { v } else { 0.0 }) / div) as f32)
+}
+
+/// The divisor [`scaled`] applies: the mean of the (finite, else 0) values over `set` if
+/// `normalize` and that mean is positive and finite, else 1 (which keeps the values exactly).
+fn divisor(values: &Grid<f32>, set: &EdgeMap, normalize: bool) -> f64 {
+    let clean = |v: f32| if v.is_finite() { v } else { 0.0 };
+    let mean = if normalize {
+        let (mut sum, mut n) = (0.0f64, 0u64);
+        let v = values.as_slice();
+        for_each_set(set.as_slice(), |i| {
+            sum += f64::from(clean(v[i]));
+            n += 1;
+        });
+        if n > 0 { sum / n as f64 } else { 0.0 }
+    } else {
+        0.0
+    };
+    if mean > 0.0 && mean.is_finite() { mean } else { 1.0 }
 }
 
 /// Σ s1 over `c1` then Σ |∇| over `c2`, raster order, one accumulator.
-fn external_sum(c1: &EdgeMap, s1: &Grid<f64>, c2: &EdgeMap, mag: &Grid<f64>) -> f64 {
+fn external_sum(c1: &EdgeMap, s1: &Grid<f32>, c2: &EdgeMap, mag: &Grid<f32>) -> f64 {
     let mut sum = 0.0;
     for (&e, &v) in c1.as_slice().iter().zip(s1.as_slice()) {
         if e {
-            sum += v;
+            sum += f64::from(v);
         }
     }
     for (&e, &v) in c2.as_slice().iter().zip(mag.as_slice()) {
         if e {
-            sum += v;
+            sum += f64::from(v);
         }
     }
     sum
@@ -341,11 +362,10 @@ pub fn relax(
     let mut info =
         Info { removed_c1: count(c1) - count(&p1), removed_c2: count(c2) - count(&p2), ..Info::default() };
     tracing::debug!(removed_c1 = info.removed_c1, removed_c2 = info.removed_c2, "pruned");
-    let s1n = scaled(s1, &p1, params.normalize);
-    let magn = scaled(magnitude, &p2, params.normalize);
-    let ab = external_sum(&p1, &s1n, &p2, &magn);
+    let div = [divisor(s1, &p1, params.normalize), divisor(magnitude, &p2, params.normalize)];
     let term = DistanceTerm::new(params.distance_cap_px());
-    let mut st = State::new(&p1, &p2, &s1n, &magn, valid, term, params.lambda, ab);
+    // Scaling fused into the state (the same values and A + B as `scaled` / `external_sum`).
+    let mut st = State::scaled(&p1, &p2, [s1, magnitude], div, valid, term, params.lambda);
     let initial = st.pos.clone();
     // The state's initial sums are a full computation already: Eⁱ summed over C1 in the same
     // order as `State::recompute_at`, and Eᵉ = A + B − (the same sums in the same order) = 0.
@@ -359,6 +379,7 @@ pub fn relax(
     let mut best = initial.clone();
     if n > 0 && params.max_sweeps > 0 {
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut coins = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x9E37_79B9_7F4A_7C15);
         let t0 = if params.t0 > 0.0 {
             params.t0
         } else {
@@ -368,10 +389,7 @@ pub fn relax(
         let mut t = t0;
         let mut best_e = st.energy();
         for _ in 0..params.max_sweeps {
-            let mut acc = 0u64;
-            for _ in 0..n {
-                acc += u64::from(st.step(&mut rng, t));
-            }
+            let acc = st.sweep(&mut rng, &mut coins, t, n);
             info.sweeps += 1;
             info.moves_tried += n as u64;
             info.moves_accepted += acc;
@@ -399,7 +417,10 @@ pub fn relax(
         if info.moves_tried > 0 { info.moves_accepted as f64 / info.moves_tried as f64 } else { 0.0 };
     tracing::debug!(?info, "relaxed");
     let (r1, r2) = st.maps(&best);
-    let edges = Grid::from_fn(r1.width(), r1.height(), |x, y| r1[(x, y)] || r2[(x, y)]);
+    let mut edges = r1.clone();
+    for (e, &b) in edges.as_mut_slice().iter_mut().zip(r2.as_slice()) {
+        *e |= b;
+    }
     (Relaxed { c1: r1, c2: r2, edges }, info)
 }
 
@@ -522,6 +543,79 @@ mod tests {
             let want1 = Grid::from_fn(40, 30, |x, y| c.c1[(x, y)] && near((x as f64, y as f64), &kept2));
             assert_eq!(p2, want2, "seed {seed}, t_d {t_d}");
             assert_eq!(p1, want1, "seed {seed}, t_d {t_d}");
+        }
+    }
+
+    #[test]
+    fn sweeps_keep_the_incremental_energy_exact() {
+        for seed in 0..4u64 {
+            let c = random_case(90, 60, 40 + seed);
+            let params =
+                Params { t_d_px: [2.0, 3.0, 6.0, 1.5][seed as usize], lambda: 0.8, ..Params::default() };
+            let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
+            let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
+            let term = DistanceTerm::new(params.distance_cap_px());
+            let mut st = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term, params.lambda);
+            let n = st.len();
+            assert!(n > 50, "seed {seed}: too few points ({n})");
+            let mut moves = Xoshiro256PlusPlus::seed_from_u64(seed);
+            let mut coins = Xoshiro256PlusPlus::seed_from_u64(seed + 100);
+            let mut accepted = 0;
+            for t in [3.0, 1.0, 0.3, 0.1, 0.01, 0.0] {
+                accepted += st.sweep(&mut moves, &mut coins, t, n);
+                let (ei, ee) = st.recompute_at(&st.pos.clone());
+                assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
+                assert_relative_eq!(
+                    st.energy(),
+                    ei + params.lambda * ee,
+                    epsilon = 1e-9,
+                    max_relative = 1e-6
+                );
+                assert!(st.cache_consistent(), "seed {seed}, t {t}: stale nearest-distance cache");
+            }
+            assert!(accepted > 100, "seed {seed}: only {accepted} accepted moves");
+            let (r1, r2) = st.maps(&st.pos);
+            let e = energy(&r1, &c.s1, &r2, &c.mag, &p1, &p2, &params);
+            assert_relative_eq!(e.total, st.energy(), epsilon = 1e-9, max_relative = 1e-6);
+        }
+    }
+
+    #[test]
+    fn fused_scaling_matches_scaled_grids() {
+        for (seed, normalize) in [(1u64, true), (2, false), (3, true)] {
+            let mut c = random_case(50, 40, seed);
+            c.mag[(3, 4)] = f32::INFINITY;
+            let (p1, p2) = prune(&c.c1, &c.c2, 3.0);
+            let (s1n, magn) = (scaled(&c.s1, &p1, normalize), scaled(&c.mag, &p2, normalize));
+            let ab = external_sum(&p1, &s1n, &p2, &magn);
+            let term = || DistanceTerm::new(4.0);
+            let a = State::new(&p1, &p2, &s1n, &magn, &c.valid, term(), 1.0, ab);
+            let div = [divisor(&c.s1, &p1, normalize), divisor(&c.mag, &p2, normalize)];
+            let b = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term(), 1.0);
+            assert_eq!(a.strengths(), b.strengths(), "seed {seed}");
+            assert_eq!(a.pos, b.pos);
+            assert_eq!(a.e_int, b.e_int);
+            assert_eq!(b.energy(), a.e_int);
+        }
+    }
+
+    #[test]
+    fn prune_matches_edt_thresholding_on_wide_images() {
+        for seed in 0..3 {
+            let c = random_case(200, 23, 70 + seed);
+            for t_d in [0.0, 1.0, 9.5, 20.0, 63.2, 64.0] {
+                let (p1, p2) = prune(&c.c1, &c.c2, t_d);
+                let d1 = edt::squared_edt(&c.c1);
+                let want2 = Grid::from_fn(c.c2.width(), c.c2.height(), |x, y| {
+                    c.c2[(x, y)] && d1[(x, y)] <= t_d * t_d
+                });
+                let d2 = edt::squared_edt(&want2);
+                let want1 = Grid::from_fn(c.c1.width(), c.c1.height(), |x, y| {
+                    c.c1[(x, y)] && d2[(x, y)] <= t_d * t_d
+                });
+                assert_eq!(p2, want2, "seed {seed}, t_d {t_d}");
+                assert_eq!(p1, want1, "seed {seed}, t_d {t_d}");
+            }
         }
     }
 

@@ -241,128 +241,114 @@ pub fn final_segmentation(
     };
     let (w, h) = (range.width() as usize, range.height() as usize);
     let r = range.as_slice();
-    let valid: Vec<bool> = r.iter().map(|v| v.is_finite()).collect();
-    // "Edge" below means "not a core pixel": an edge pixel or within gap_close_px of one.
-    let mut e: Vec<bool> = if params.gap_close_px > 0.0 {
-        let g2 = params.gap_close_px * params.gap_close_px;
-        crate::edt::squared_edt(edges).as_slice().iter().map(|&d| d <= g2).collect()
+    // Core pixels: valid, not an edge pixel and not within gap_close_px of one.
+    let mut core: Vec<bool> = if params.gap_close_px > 0.0 {
+        crate::edt::near(edges, params.gap_close_px)
     } else {
         edges.as_slice().to_vec()
     };
+    for (c, &v) in core.iter_mut().zip(r) {
+        *c = !*c & v.is_finite();
+    }
     if let (Some(g), false) = (guide, params.unlabelled_core) {
-        for (ei, &l) in e.iter_mut().zip(g) {
-            *ei |= l == 0;
+        for (c, &l) in core.iter_mut().zip(g) {
+            *c &= l != 0;
         }
     }
-    let point = |i: usize| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i]));
-    let same = |i: usize, j: usize| guide.is_none_or(|g| g[i] == g[j]);
+    let point = |x: usize, y: usize| camera.point(x as f64, y as f64, f64::from(r[y * w + x]));
 
-    // 1. 4-connected components of core pixels, in raster order of their first pixel.
-    let mut comp = vec![0u32; w * h];
-    let mut members: Vec<Vec<usize>> = Vec::new();
-    let mut stack = Vec::new();
-    for s in 0..w * h {
-        if !valid[s] || e[s] || comp[s] != 0 {
-            continue;
-        }
-        let id = members.len() as u32 + 1;
-        let mut list = Vec::new();
-        comp[s] = id;
-        stack.push(s);
-        while let Some(i) = stack.pop() {
-            list.push(i);
-            let (x, y) = (i % w, i / w);
-            let mut visit = |j: usize| {
-                if valid[j] && !e[j] && comp[j] == 0 && same(i, j) {
-                    comp[j] = id;
-                    stack.push(j);
+    // 1. 4-connected components of core pixels (two neighbours connect only if their guide
+    //    labels agree), numbered in raster order of their first pixel.
+    let (mut comp, sizes) = components(&core, guide, w, h);
+    drop(core);
+
+    // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
+    let keep: Vec<bool> = sizes.iter().map(|&n| u64::from(n) >= u64::from(params.min_region_px)).collect();
+    let mut moments: Vec<Moments> = vec![Moments::default(); sizes.len()];
+    // Runs of one component are summed in a local copy of its moments (the same additions in
+    // the same order, but in registers).
+    let mut cur = 0u32;
+    let mut acc = Moments::default();
+    for y in 0..h {
+        for (x, c) in comp[y * w..(y + 1) * w].iter_mut().enumerate() {
+            if *c == 0 {
+                continue;
+            }
+            if !keep[*c as usize - 1] {
+                *c = 0;
+            } else if let Some(p) = point(x, y) {
+                if *c != cur {
+                    if cur != 0 {
+                        moments[cur as usize - 1] = acc;
+                    }
+                    cur = *c;
+                    acc = moments[cur as usize - 1];
                 }
-            };
-            if x > 0 {
-                visit(i - 1);
-            }
-            if x + 1 < w {
-                visit(i + 1);
-            }
-            if y > 0 {
-                visit(i - w);
-            }
-            if y + 1 < h {
-                visit(i + w);
+                acc.add(p);
             }
         }
-        list.sort_unstable();
-        members.push(list);
     }
-
-    // 2. Drop small components; fit a plane to every kept one.
-    let mut moments: Vec<Moments> = vec![Moments::default(); members.len()];
-    let mut planes: Vec<Option<Plane>> = Vec::with_capacity(members.len());
-    for (list, m) in members.iter().zip(&mut moments) {
-        if (list.len() as u64) < u64::from(params.min_region_px) {
-            planes.push(None);
-            for &i in list {
-                comp[i] = 0;
-            }
-        } else {
-            for p in list.iter().filter_map(|&i| point(i)) {
-                m.add(p);
-            }
-            planes.push(Some(fit_plane(m, camera)));
-        }
+    if cur != 0 {
+        moments[cur as usize - 1] = acc;
     }
+    let mut planes: Vec<Option<Plane>> =
+        moments.iter().zip(&keep).map(|(m, &k)| k.then(|| fit_plane(m, camera))).collect();
 
-    // 3. Fill unlabelled valid pixels ring by ring.
+    // 3. Fill unlabelled valid pixels ring by ring. Each ring is decided from the labels of the
+    //    previous rings only, so the order of pixels within a ring does not matter.
     let mut in_ring = vec![false; w * h];
-    let mut ring: Vec<usize> = Vec::new();
-    let neighbours = |i: usize| {
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        NBR8.iter().filter_map(move |&(dx, dy)| {
-            let (nx, ny) = (x + dx, y + dy);
-            (nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64).then(|| ny as usize * w + nx as usize)
-        })
-    };
-    for i in 0..w * h {
-        if valid[i] && comp[i] == 0 && neighbours(i).any(|j| comp[j] != 0) {
-            in_ring[i] = true;
-            ring.push(i);
+    let mut ring: Vec<(u32, u32)> = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if comp[i] == 0 && r[i].is_finite() {
+                let mut touches = false;
+                for_neighbours(x, y, w, h, |j, _, _| touches |= comp[j] != 0);
+                if touches {
+                    in_ring[i] = true;
+                    ring.push((x as u32, y as u32));
+                }
+            }
         }
     }
     let mut assign = Vec::new();
+    let mut next = Vec::new();
     let mut rings = 0u32;
     while !ring.is_empty() {
         rings += 1;
         assign.clear();
-        for &i in &ring {
-            let p = point(i).expect("ring pixels are valid");
+        for &(x, y) in &ring {
+            let (x, y) = (x as usize, y as usize);
+            let p = point(x, y).expect("ring pixels are valid");
             let mut best: Option<(f64, u32)> = None;
-            for j in neighbours(i) {
+            let mut last = 0u32;
+            for_neighbours(x, y, w, h, |j, _, _| {
                 let l = comp[j];
-                if l == 0 {
-                    continue;
+                if l == 0 || l == last {
+                    return;
                 }
+                last = l;
                 let plane = planes[l as usize - 1].as_ref().expect("labelled pixels belong to kept regions");
                 let res = plane.residual(p);
                 if best.is_none_or(|(br, bl)| res < br || (res == br && l < bl)) {
                     best = Some((res, l));
                 }
-            }
+            });
             assign.push(best.expect("ring pixels touch a region").1);
         }
-        for (&i, &l) in ring.iter().zip(&assign) {
-            comp[i] = l;
+        for (&(x, y), &l) in ring.iter().zip(&assign) {
+            comp[y as usize * w + x as usize] = l;
         }
-        let mut next = Vec::new();
-        for &i in &ring {
-            for j in neighbours(i) {
-                if valid[j] && comp[j] == 0 && !in_ring[j] {
+        next.clear();
+        for &(x, y) in &ring {
+            for_neighbours(x as usize, y as usize, w, h, |j, nx, ny| {
+                if comp[j] == 0 && !in_ring[j] && r[j].is_finite() {
                     in_ring[j] = true;
-                    next.push(j);
+                    next.push((nx as u32, ny as u32));
                 }
-            }
+            });
         }
-        next.sort_unstable();
-        ring = next;
+        std::mem::swap(&mut ring, &mut next);
     }
     tracing::debug!(components = planes.len(), rings, "filled");
 
@@ -373,23 +359,23 @@ pub fn final_segmentation(
     }
 
     // 5. Consecutive labels in raster order; region statistics.
+    let root: Vec<u32> = (0..=planes.len() as u32).map(|c| find(&mut parent, c)).collect();
     let mut map = vec![0u32; planes.len() + 1];
-    let mut sizes: Vec<u32> = Vec::new();
     let mut order: Vec<u32> = Vec::new();
-    let mut labels = vec![0u32; w * h];
-    for i in 0..w * h {
-        if comp[i] == 0 {
+    let mut labels = comp;
+    for l in &mut labels {
+        if *l == 0 {
             continue;
         }
-        let c = find(&mut parent, comp[i]) as usize;
+        let c = root[*l as usize] as usize;
         if map[c] == 0 {
             order.push(c as u32);
-            sizes.push(0);
             map[c] = order.len() as u32;
         }
-        labels[i] = map[c];
-        sizes[map[c] as usize - 1] += 1;
+        *l = map[c];
     }
+    let mut sizes = vec![0u32; order.len()];
+    count_labels(&labels, &mut sizes);
     let regions = order
         .iter()
         .zip(&sizes)
@@ -410,6 +396,121 @@ pub fn final_segmentation(
     (labels, regions)
 }
 
+/// Calls `f(index, x, y)` for every in-image 8-neighbour of (x, y).
+#[inline(always)]
+fn for_neighbours(x: usize, y: usize, w: usize, h: usize, mut f: impl FnMut(usize, usize, usize)) {
+    let i = y * w + x;
+    if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
+        f(i - w - 1, x - 1, y - 1);
+        f(i - w, x, y - 1);
+        f(i - w + 1, x + 1, y - 1);
+        f(i - 1, x - 1, y);
+        f(i + 1, x + 1, y);
+        f(i + w - 1, x - 1, y + 1);
+        f(i + w, x, y + 1);
+        f(i + w + 1, x + 1, y + 1);
+    } else {
+        for &(dx, dy) in &NBR8 {
+            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+            if nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 {
+                f(ny as usize * w + nx as usize, nx as usize, ny as usize);
+            }
+        }
+    }
+}
+
+/// 4-connected components of the `core` pixels, two neighbours connected only if their
+/// `guide` labels are equal: (component per pixel, 0 = none, numbered from 1 in raster order
+/// of each component's first pixel; component sizes). Two-pass union-find labelling.
+fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut lab = vec![0u32; w * h];
+    // Provisional labels from 1; parent[l] ≤ l, so roots are the smallest label of a set.
+    let mut parent: Vec<u32> = vec![0];
+    // Runs of core pixels with one guide label; a run connects to the labels right above it.
+    for y in 0..h {
+        let row = y * w;
+        let mut x = 0;
+        while x < w {
+            if !core[row + x] {
+                x += 1;
+                continue;
+            }
+            let g = guide.map_or(0, |g| g[row + x]);
+            let mut e = x + 1;
+            while e < w && core[row + e] && guide.is_none_or(|gg| gg[row + e] == g) {
+                e += 1;
+            }
+            let mut l = 0u32;
+            if y > 0 {
+                let mut last = 0u32;
+                for (k, &u) in lab[row - w + x..row - w + e].iter().enumerate() {
+                    // All pixels of a label share one guide label, so skipping repeats is exact.
+                    if u == 0 || u == last {
+                        continue;
+                    }
+                    last = u;
+                    if guide.is_some_and(|gg| gg[row - w + x + k] != g) {
+                        continue;
+                    }
+                    let ru = find(&mut parent, u);
+                    l = if l == 0 || l == ru {
+                        ru
+                    } else {
+                        let (lo, hi) = (l.min(ru), l.max(ru));
+                        parent[hi as usize] = lo;
+                        lo
+                    };
+                }
+            }
+            if l == 0 {
+                parent.push(parent.len() as u32);
+                l = parent.len() as u32 - 1;
+            }
+            lab[row + x..row + e].fill(l);
+            x = e;
+        }
+    }
+    // A set's root is its smallest provisional label, the one created at its first pixel in
+    // raster order; so numbering the roots in label order numbers the components in raster
+    // order of their first pixel. parent[l] < l for non-roots, so one ascending pass resolves
+    // every label.
+    let mut id = vec![0u32; parent.len()];
+    let mut n = 0u32;
+    for l in 1..parent.len() {
+        let p = parent[l] as usize;
+        id[l] = if p == l {
+            n += 1;
+            n
+        } else {
+            id[p]
+        };
+    }
+    for l in &mut lab {
+        *l = id[*l as usize];
+    }
+    let mut sizes = vec![0u32; n as usize];
+    count_labels(&lab, &mut sizes);
+    (lab, sizes)
+}
+
+/// Adds the number of pixels of each label `l ≥ 1` to `sizes[l − 1]` (run by run, so that a
+/// long run costs no chain of increments through memory).
+fn count_labels(labels: &[u32], sizes: &mut [u32]) {
+    let (mut cur, mut n) = (0u32, 0u32);
+    for &l in labels {
+        if l != cur {
+            if cur != 0 {
+                sizes[cur as usize - 1] += n;
+            }
+            (cur, n) = (l, 0);
+        }
+        n += 1;
+    }
+    if cur != 0 {
+        sizes[cur as usize - 1] += n;
+    }
+}
+
 /// Step 4 of [`final_segmentation`]: union-find merging of adjacent components (labels in
 /// `comp`, 1-based into `moments`/`planes`) over borders weakly supported by `edges`. Roots are
 /// the smaller label; the root's moments and plane become the merged group's.
@@ -427,15 +528,19 @@ fn merge_unsupported(
 ) {
     let ed = edges.as_slice();
     // Within 1 px (8-neighbourhood) of an edge pixel.
+    // Horizontal 3-wide OR per row, then vertical 3-high OR of those rows.
+    let mut hor = ed.to_vec();
+    for (hrow, erow) in hor.chunks_exact_mut(w.max(1)).zip(ed.chunks_exact(w.max(1))) {
+        for x in 1..w {
+            hrow[x] |= erow[x - 1];
+            hrow[x - 1] |= erow[x];
+        }
+    }
     let mut near = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            if ed[y * w + x] {
-                for yy in y.saturating_sub(1)..(y + 2).min(h) {
-                    for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                        near[yy * w + xx] = true;
-                    }
-                }
+    for (y, nrow) in near.chunks_exact_mut(w.max(1)).enumerate() {
+        for yy in y.saturating_sub(1)..(y + 2).min(h) {
+            for (n, &v) in nrow.iter_mut().zip(&hor[yy * w..(yy + 1) * w]) {
+                *n |= v;
             }
         }
     }
@@ -450,13 +555,17 @@ fn merge_unsupported(
         }
     };
     for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if x + 1 < w {
-                add(i, i + 1);
+        let row = y * w;
+        for x in 1..w {
+            if comp[row + x - 1] != comp[row + x] {
+                add(row + x - 1, row + x);
             }
-            if y + 1 < h {
-                add(i, i + w);
+        }
+        if y + 1 < h {
+            for x in 0..w {
+                if comp[row + x] != comp[row + w + x] {
+                    add(row + x, row + w + x);
+                }
             }
         }
     }
@@ -729,6 +838,62 @@ mod tests {
             );
         let (_, regions) = final_segmentation(&tilted, &Camera::Grid, &none, Some(&rg), &regions_mode());
         assert_eq!(regions.len(), 2);
+    }
+
+    /// Reference labelling: flood fill from every unlabelled core pixel in raster order.
+    fn components_by_flood_fill(core: &[bool], guide: Option<&[u32]>, w: usize, h: usize) -> Vec<u32> {
+        let mut lab = vec![0u32; w * h];
+        let mut next = 0;
+        for s in 0..w * h {
+            if !core[s] || lab[s] != 0 {
+                continue;
+            }
+            next += 1;
+            lab[s] = next;
+            let mut stack = vec![s];
+            while let Some(i) = stack.pop() {
+                let (x, y) = (i % w, i / w);
+                let mut nb = Vec::new();
+                if x > 0 {
+                    nb.push(i - 1);
+                }
+                if x + 1 < w {
+                    nb.push(i + 1);
+                }
+                if y > 0 {
+                    nb.push(i - w);
+                }
+                if y + 1 < h {
+                    nb.push(i + w);
+                }
+                for j in nb {
+                    if core[j] && lab[j] == 0 && guide.is_none_or(|g| g[i] == g[j]) {
+                        lab[j] = next;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        lab
+    }
+
+    #[test]
+    fn union_find_components_match_flood_fill() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(12);
+        for case in 0..60 {
+            let (w, h) = (rng.random_range(1..40usize), rng.random_range(1..30usize));
+            let p = [0.3, 0.55, 0.7, 0.9][case % 4];
+            let core: Vec<bool> = (0..w * h).map(|_| rng.random_bool(p)).collect();
+            let guide: Vec<u32> = (0..w * h).map(|i| ((i % w) / 7 + (i / w) / 5) as u32 % 3).collect();
+            for g in [None, Some(guide.as_slice())] {
+                let (lab, sizes) = components(&core, g, w, h);
+                assert_eq!(lab, components_by_flood_fill(&core, g, w, h), "case {case}");
+                for (k, &n) in sizes.iter().enumerate() {
+                    assert_eq!(n as usize, lab.iter().filter(|&&l| l == k as u32 + 1).count(), "case {case}");
+                }
+            }
+        }
     }
 
     #[test]
