@@ -117,6 +117,11 @@ impl Config {
         Self::from_toml(&text, path)
     }
 
+    /// Reads `path` when given ([`Config::load`]), otherwise returns the defaults.
+    pub fn load_or_default(path: Option<&Path>) -> Result<Config, ConfigError> {
+        path.map_or_else(|| Ok(Config::default()), Self::load)
+    }
+
     /// Parses and validates TOML text; `path` only names the source in errors.
     pub fn from_toml(text: &str, path: &Path) -> Result<Config, ConfigError> {
         let config: Config = toml::from_str(text)
@@ -154,14 +159,14 @@ impl Config {
     }
 }
 
-/// The raw-depth Canny baseline's thresholds (quantiles 0.80 / 0.95 of the magnitude), the best found on the
-/// training split by `cargo run --release --example table1 -- --tune`.
+/// The raw-depth Canny baseline's thresholds (2 and 4 times the noise level of the magnitude), the best found on
+/// the training split by `cargo run --release --example table1 -- --tune`.
 fn vcanny_raw_preset() -> vcanny::Params {
     vcanny::Params {
         thresholds: vcanny::Thresholds {
-            mode: vcanny::ThresholdMode::Quantile,
-            low: 0.8,
-            high: 0.95,
+            mode: vcanny::ThresholdMode::NoiseRelative,
+            low: 2.0,
+            high: 4.0,
             ..Default::default()
         },
         ..Default::default()

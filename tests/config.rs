@@ -23,6 +23,16 @@ fn paper_toml_loads_and_differs_from_default() {
 }
 
 #[test]
+fn load_or_default_reads_the_file_or_gives_the_defaults() {
+    assert_eq!(Config::load_or_default(None).unwrap(), Config::default());
+    let paper = root().join("configs/paper.toml");
+    assert_eq!(Config::load_or_default(Some(&paper)).unwrap(), Config::paper());
+    let missing = root().join("configs/no-such-file.toml");
+    let err = Config::load_or_default(Some(&missing)).unwrap_err().to_string();
+    assert!(err.contains("no-such-file.toml"), "{err}");
+}
+
+#[test]
 fn unknown_key_is_an_error_naming_it() {
     let err = Config::from_toml("[regiongrow]\nt_mm = 1.0\n", Path::new("x.toml")).unwrap_err().to_string();
     assert!(err.starts_with("x.toml: "), "{err}");

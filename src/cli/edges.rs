@@ -25,10 +25,7 @@ pub(crate) struct Args {
 
 /// Runs `rangeseg edges`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let cfg = match &args.config {
-        Some(path) => rangeseg::Config::load(path)?,
-        None => rangeseg::Config::default(),
-    };
+    let cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let edges = if args.raw {
         vcanny::detect_raw(&frame.range, &cfg.raw_canny)

@@ -27,10 +27,7 @@ pub(crate) struct Args {
 
 /// Runs `rangeseg regions`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let cfg = match &args.config {
-        Some(path) => rangeseg::Config::load(path)?,
-        None => rangeseg::Config::default(),
-    };
+    let cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
     let seed = args.seed.unwrap_or(cfg.seed);
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let feats = features::compute(&frame.range, &cfg.features);

@@ -32,10 +32,7 @@ const RANGE_EXTENSIONS: &[&str] = &["range", "png", "pgm", "tif", "tiff", "pcd"]
 
 /// Runs `rangeseg segment`.
 pub(crate) fn run(args: Args) -> Result<ExitCode> {
-    let mut config = match &args.config {
-        Some(path) => Config::load(path)?,
-        None => Config::default(),
-    };
+    let mut config = Config::load_or_default(args.config.as_deref())?;
     if let Some(seed) = args.seed {
         config.seed = seed;
     }
