@@ -4,7 +4,7 @@
 //!
 //! With `--tune`, thresholds (and the plane channel weights) are chosen by a small grid search maximising the mean
 //! one-to-one F on the training split only, then applied to the requested split. Without it, the plane detector
-//! uses `vcanny::Params::default()` and the raw detector [`raw_default`].
+//! and the raw detector use `configs/default.toml`'s `[vcanny]` and `[raw_canny]` (`rangeseg::Config::default()`).
 #![allow(clippy::print_stdout)]
 
 use anyhow::Context;
@@ -14,19 +14,6 @@ use std::path::PathBuf;
 use vcanny::{Params, ThresholdMode, Thresholds};
 
 const TAU_PX: f64 = 2.0;
-
-/// Thresholds of the raw-depth baseline tuned on the training split (see the report).
-fn raw_default() -> Params {
-    Params {
-        thresholds: Thresholds {
-            mode: ThresholdMode::Quantile,
-            low: 0.8,
-            high: 0.95,
-            ..Thresholds::default()
-        },
-        ..Params::default()
-    }
-}
 
 struct Image {
     stem: String,
@@ -137,8 +124,14 @@ fn main() -> anyhow::Result<()> {
     }
     let ds = rangeio::abw::Dataset::discover(&dir)?;
     let train = load(&ds.train)?;
-    let (raw_p, plane_p) =
-        if do_tune { (tune(&train, true), tune(&train, false)) } else { (raw_default(), Params::default()) };
+    let (raw_p, plane_p) = if do_tune {
+        (tune(&train, true), tune(&train, false))
+    } else {
+        {
+            let c = rangeseg::Config::default();
+            (c.raw_canny, c.vcanny)
+        }
+    };
     let imgs = match split.as_str() {
         "train" => train,
         "test" => load(&ds.test)?,

@@ -199,8 +199,14 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
             (m, score)
         })
         .collect();
-    // Best: highest score; ties go to the earlier combination (grid order), so the choice is deterministic.
-    let best = (0..means.len()).fold(0, |b, c| if means[c].1 > means[b].1 { c } else { b });
+    // Best: highest score; ties (frequent: Hoover counts on 10 images saturate) go to the better region growing
+    // alone, then to the higher boundary F of the final edges, then to the earlier combination (grid order), so
+    // the choice is deterministic.
+    // Scores are means of counts: round away the last bits that the summation order leaves.
+    let tie = |v: f64| (v * 1e6).round();
+    let key = |c: usize| (tie(means[c].1), tie(means[c].0.rg_correct), means[c].0.f);
+    let best = (0..means.len())
+        .fold(0, |b, c| if key(c).partial_cmp(&key(b)) == Some(std::cmp::Ordering::Greater) { c } else { b });
 
     let out = root.join("target/tune");
     std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;

@@ -128,7 +128,7 @@ impl Default for Params {
             max_seeds: 10_000,
             max_k_diff: 0.01,
             max_curvedness: 1.0,
-            max_angle_deg: 30.0,
+            max_angle_deg: 40.0,
             max_residual: 3.0,
             max_slant_deg: 80.0,
             refit_every_px: 16,

@@ -77,8 +77,8 @@ pub struct Params {
 impl Default for Params {
     fn default() -> Self {
         Self {
-            t_d_px: 6.0,
-            lambda: 1.0,
+            t_d_px: 9.0,
+            lambda: 0.3,
             t0: 0.0,
             auto_t0_acceptance: 0.01,
             cooling_delta: 0.7,

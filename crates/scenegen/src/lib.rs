@@ -9,8 +9,9 @@
 //! Gaussian depth noise, mixed pixels at jump edges and dropout blobs; and quantises to 8 bits.
 //!
 //! Ground truth follows the ABW rules: one label per connected visible piece of a plane,
-//! numbered from 10 in raster order of first appearance; 0 on no-data pixels, mixed pixels and
-//! pieces under `min_region_px`. Coplanar faces that touch (an L-block's side, two boxes of the
+//! numbered from 10 in raster order of first appearance; 0 on no-data pixels and pieces under
+//! `min_region_px`. A mixed pixel keeps the label of the face its ray hit (SPEC §2.2: 0 only for
+//! no data and small faces), so depth jumps are scored as boundaries wherever no shadow hides them. Coplanar faces that touch (an L-block's side, two boxes of the
 //! same height side by side) form one region, since no sensor can tell them apart.
 //!
 //! Everything is computed with IEEE `+ − × ÷ √` on one thread from one
@@ -266,6 +267,8 @@ mod tests {
     #[test]
     fn regions_are_planar_in_3d() {
         for (p, seed) in [benchmark_image(false, 0), benchmark_image(false, 3), benchmark_image(true, 19)] {
+            // Mixed pixels keep their face's label but lie between two surfaces by construction.
+            let p = Params { mixed_pixel_prob: 0.0, ..p };
             let s = generate(&p, seed);
             let cam = Camera::Abw(p.calibration);
             let k = s.labels.as_slice().iter().copied().max().unwrap_or(0);
@@ -283,6 +286,18 @@ mod tests {
                 assert!(rms < 1.3, "seed {seed}: region {l} off its plane by {rms} mm rms");
             }
         }
+    }
+
+    #[test]
+    fn mixed_pixels_change_depth_not_ground_truth() {
+        // Not 0: with 0 the mixed-pixel pass and its random draws are skipped, which moves the dropouts.
+        let none = Params { mixed_pixel_prob: 1e-12, ..Params::default() };
+        let all = Params { mixed_pixel_prob: 1.0, ..Params::default() };
+        let (a, b) = (generate(&none, 5), generate(&all, 5));
+        let changed = a.range.as_slice().iter().zip(b.range.as_slice()).filter(|(p, q)| p != q).count();
+        assert!(changed > 100, "only {changed} mixed pixels on the jumps");
+        let relabelled = a.labels.as_slice().iter().zip(b.labels.as_slice()).filter(|(p, q)| p != q).count();
+        assert_eq!(relabelled, 0, "mixed pixels must keep their face's label");
     }
 
     #[test]

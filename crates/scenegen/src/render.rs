@@ -211,8 +211,7 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
         }
     }
 
-    // Mixed pixels at jump edges: a value between the two surfaces, and no ground truth.
-    let mut mixed = vec![false; n];
+    // Mixed pixels at jump edges: a value between the two surfaces; the label stays the hit face's.
     let mut v_out = v_clean.clone();
     if params.mixed_pixel_prob > 0.0 {
         for y in 0..h {
@@ -253,7 +252,6 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
                     let (p, a) = (rng.random::<f64>(), 0.15 + 0.7 * rng.random::<f64>());
                     if p < params.mixed_pixel_prob {
                         v_out[i] = v_clean[i] + a * (q - v_clean[i]);
-                        mixed[i] = true;
                     }
                 }
             }
@@ -288,10 +286,10 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
         }
     }
 
-    // Ground truth: connected pieces of one plane, on valid unmixed pixels.
+    // Ground truth: connected pieces of one plane, on valid pixels (mixed ones included).
     let key = Grid::from_fn(w, h, |x, y| {
         let i = y as usize * w as usize + x as usize;
-        if range[(x, y)] == 0 || mixed[i] || face[i] == NO_FACE { u32::MAX } else { group[face[i] as usize] }
+        if range[(x, y)] == 0 || face[i] == NO_FACE { u32::MAX } else { group[face[i] as usize] }
     });
     let (labels, region_group) = label_components(&key, params.min_region_px);
     let normal_of = |l: u32| faces[region_group[(l - 10) as usize] as usize].0;
