@@ -32,6 +32,15 @@ fn compute(b: divan::Bencher, side: u32) {
     b.bench(|| features::compute(divan::black_box(&img), &p));
 }
 
+/// `compute_into` with the output grids of the previous frame reused (a stream of frames of one size).
+#[divan::bench(args = [512])]
+fn compute_into(b: divan::Bencher, side: u32) {
+    let img = scene(side);
+    let p = features::Params::default();
+    let mut out = features::compute(&img, &p);
+    b.bench_local(|| features::compute_into(divan::black_box(&img), &p, &mut out));
+}
+
 #[divan::bench(args = [512])]
 fn fit_planes(b: divan::Bencher, side: u32) {
     let img = scene(side);
