@@ -353,18 +353,7 @@ impl<'a> RowFitter<'a> {
             let r0 = &mut self.ring_r0[slot..slot + m];
             let zs: [&[f32]; W] = std::array::from_fn(|j| &z[j..j + m]);
             for i in 0..m {
-                let c = zs[R][i];
-                let (mut a1, mut ap, mut a0) = (0.0f32, 0.0f32, 0.0f32);
-                for k in 1..=R {
-                    let (a, b) = (zs[R + k][i], zs[R - k][i]);
-                    a1 += k as f32 * (a - b);
-                    let e = (a - c) + (b - c);
-                    ap += pk[k] * e;
-                    a0 += e;
-                }
-                h1[i] = a1;
-                hp[i] = ap;
-                r0[i] = a0;
+                (h1[i], hp[i], r0[i]) = symmetric_taps::<R, W>(&zs, &pk, i);
             }
             self.next_row += 1;
         }
@@ -372,18 +361,7 @@ impl<'a> RowFitter<'a> {
         let rows: [&[f32]; W] = std::array::from_fn(|j| &src[(y + j - R) * wu..(y + j - R + 1) * wu]);
         let (v1, vp, c0) = (&mut self.v1[..wu], &mut self.vp[..wu], &mut self.c0[..wu]);
         for i in 0..wu {
-            let c = rows[R][i];
-            let (mut a1, mut ap, mut a0) = (0.0f32, 0.0f32, 0.0f32);
-            for k in 1..=R {
-                let (a, b) = (rows[R + k][i], rows[R - k][i]);
-                a1 += k as f32 * (a - b);
-                let e = (a - c) + (b - c);
-                ap += pk[k] * e;
-                a0 += e;
-            }
-            v1[i] = a1;
-            vp[i] = ap;
-            c0[i] = a0;
+            (v1[i], vp[i], c0[i]) = symmetric_taps::<R, W>(&rows, &pk, i);
         }
         // Column sums of the row passes, row box sums of the column-first pass, and the fits.
         let slot = |v: usize| ((y + v - R) % W) * m;
@@ -617,4 +595,25 @@ impl ShapeKernel {
             has_quad,
         }
     }
+}
+
+/// The three symmetric window sums at position `i` of `W = 2R + 1` shifted slices (`s[R]` is the centre):
+/// `Σ k·(z₊ₖ − z₋ₖ)`, `Σ p(k)·((z₊ₖ − z₀) + (z₋ₖ − z₀))` and `Σ ((z₊ₖ − z₀) + (z₋ₖ − z₀))` over `k = 1..=R`,
+/// in that order of operations (the fused fast path's row and column-first passes share it).
+#[inline(always)]
+fn symmetric_taps<const R: usize, const W: usize>(
+    s: &[&[f32]; W],
+    pk: &[f32; W],
+    i: usize,
+) -> (f32, f32, f32) {
+    let c = s[R][i];
+    let (mut a1, mut ap, mut a0) = (0.0f32, 0.0f32, 0.0f32);
+    for k in 1..=R {
+        let (a, b) = (s[R + k][i], s[R - k][i]);
+        a1 += k as f32 * (a - b);
+        let e = (a - c) + (b - c);
+        ap += pk[k] * e;
+        a0 += e;
+    }
+    (a1, ap, a0)
 }

@@ -166,7 +166,6 @@ impl Proj for GridProj {
 
 /// Padded geometry records, initial labels (0 = growable, [`BLOCKED`] otherwise) and the number
 /// of growable pixels.
-#[allow(clippy::too_many_arguments)]
 fn geometry<P: Proj>(
     proj: &P,
     range: &[f32],

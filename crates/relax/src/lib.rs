@@ -480,6 +480,13 @@ mod tests {
         m.as_slice().iter().filter(|&&b| b).count()
     }
 
+    /// The incrementally kept energies of `st` equal a recomputation at its current positions.
+    fn assert_energy_is_recomputed(st: &State, lambda: f64) {
+        let (ei, ee) = st.recompute_at(&st.pos.clone());
+        assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
+        assert_relative_eq!(st.energy(), ei + lambda * ee, epsilon = 1e-9, max_relative = 1e-6);
+    }
+
     #[test]
     fn incremental_energy_matches_full_recomputation() {
         for seed in 0..4u64 {
@@ -499,14 +506,7 @@ mod tests {
                 let t = if m < 3000 { 2.0 } else { 0.05 };
                 if st.step(&mut rng, t) {
                     accepted += 1;
-                    let (ei, ee) = st.recompute_at(&st.pos.clone());
-                    assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
-                    assert_relative_eq!(
-                        st.energy(),
-                        ei + params.lambda * ee,
-                        epsilon = 1e-9,
-                        max_relative = 1e-6
-                    );
+                    assert_energy_is_recomputed(&st, params.lambda);
                     if accepted % 97 == 0 {
                         assert!(st.cache_consistent(), "seed {seed}, move {m}: stale nearest-distance cache");
                     }
@@ -563,14 +563,7 @@ mod tests {
             let mut accepted = 0;
             for t in [3.0, 1.0, 0.3, 0.1, 0.01, 0.0] {
                 accepted += st.sweep(&mut moves, &mut coins, t, n);
-                let (ei, ee) = st.recompute_at(&st.pos.clone());
-                assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
-                assert_relative_eq!(
-                    st.energy(),
-                    ei + params.lambda * ee,
-                    epsilon = 1e-9,
-                    max_relative = 1e-6
-                );
+                assert_energy_is_recomputed(&st, params.lambda);
                 assert!(st.cache_consistent(), "seed {seed}, t {t}: stale nearest-distance cache");
             }
             assert!(accepted > 100, "seed {seed}: only {accepted} accepted moves");
