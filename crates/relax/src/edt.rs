@@ -112,7 +112,7 @@ pub(crate) fn reach(t: f64) -> Vec<usize> {
 }
 
 /// For every pixel, whether some `true` pixel of `mask` is within Euclidean distance `t`
-/// (`0 ≤ t ≤ 64`): the same as `squared_edt(mask) ≤ t²`, in O(pixels · t) cheap vectorisable
+/// (`0 ≤ t < 65535`, as row distances are kept in `u16`): the same as `squared_edt(mask) ≤ t²`, in O(pixels · t) cheap vectorisable
 /// steps. Per row, the horizontal distance to the nearest mask pixel (capped at ⌊t⌋ + 1) by two
 /// sweeps; then a pixel is near if a row `dy` away has that distance ≤ `reach[dy]`.
 pub(crate) fn near(mask: &Grid<bool>, t: f64) -> Vec<bool> {

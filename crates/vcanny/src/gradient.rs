@@ -124,7 +124,7 @@ fn weighted_sum(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
 /// tap order.
 fn horizontal(pad: &[f32], g: &[f32], dst: &mut [f32]) {
     let w = dst.len();
-    let mut rows = [&pad[..0]; 31];
+    let mut rows = [&pad[..0]; crate::MAX_KERNEL_PX];
     for (k, row) in rows.iter_mut().enumerate().take(g.len()) {
         *row = &pad[k..k + w];
     }
@@ -218,7 +218,7 @@ pub(crate) fn gradient(
             let k0 = r.saturating_sub(t);
             let k1 = g.len().min(h + r - t);
             let vertical = |plane: usize, out: &mut [f32]| {
-                let mut rows = [&hbuf[..0]; 31];
+                let mut rows = [&hbuf[..0]; crate::MAX_KERNEL_PX];
                 for k in k0..k1 {
                     let base = (plane * ring + (t + k - r) % ring) * w;
                     rows[k - k0] = &hbuf[base..base + w];

@@ -15,6 +15,9 @@ mod gradient;
 
 use rangeimage::{EdgeMap, Grid, PlaneMap, RangeImage};
 
+/// Largest Gaussian kernel side `kernel_px` accepted (the smoothing passes keep this many row slices on the stack).
+const MAX_KERNEL_PX: usize = 31;
+
 /// How [`Thresholds::low`] and [`Thresholds::high`] are read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -79,8 +82,12 @@ impl Params {
         if !(self.sigma_px.is_finite() && self.sigma_px > 0.0) {
             return Err(format!("vcanny.sigma_px must be positive, got {}", self.sigma_px));
         }
-        if self.kernel_px == 0 || self.kernel_px.is_multiple_of(2) || self.kernel_px > 31 {
-            return Err(format!("vcanny.kernel_px must be odd and in 1..=31, got {}", self.kernel_px));
+        if self.kernel_px == 0 || self.kernel_px.is_multiple_of(2) || self.kernel_px as usize > MAX_KERNEL_PX
+        {
+            return Err(format!(
+                "vcanny.kernel_px must be odd and in 1..={MAX_KERNEL_PX}, got {}",
+                self.kernel_px
+            ));
         }
         if self.weights.iter().any(|w| !(w.is_finite() && *w >= 0.0))
             || self.weights.iter().all(|&w| w == 0.0)
