@@ -34,3 +34,18 @@ fn stages_in_memory(b: divan::Bencher) {
     let config = Config::default();
     b.bench(|| rangeseg::segment(&range, &rangeimage::Camera::ABW0, &config));
 }
+
+/// The vectorial Canny from a range image to C2: the local planes (`features::fit_planes`) and
+/// `vcanny::detect_planes` on them, on `abw.train.0` in memory.
+#[divan::bench]
+fn range_to_c2(b: divan::Bencher) {
+    let (params, seed) = scenegen::benchmark_image(false, 0);
+    let scene = scenegen::generate(&params, seed);
+    let range = scene.range.map(|&v| if v == 0 { f32::NAN } else { f32::from(v) });
+    let config = Config::default();
+    b.bench(|| {
+        let planes = features::fit_planes(divan::black_box(&range), config.features.window_px);
+        let valid = rangeimage::valid_mask(&range);
+        vcanny::detect_planes(&planes, &valid, &config.vcanny)
+    });
+}
