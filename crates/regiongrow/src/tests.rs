@@ -347,3 +347,105 @@ fn pinhole_camera_grows_regions() {
     let (again, _) = grow(&s.range, &s.features, &cam, &params, 1);
     assert_eq!(again.labels, seg.labels);
 }
+
+/// FNV-1a over everything `grow` returns: labels, C1, every region field and every `Info` field.
+fn output_hash(seg: &Segmentation, info: &Info) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |v: u32| {
+        for b in v.to_le_bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    seg.labels.as_slice().iter().for_each(|&l| eat(l));
+    seg.c1.as_slice().iter().for_each(|&e| eat(u32::from(e)));
+    for r in &seg.regions {
+        [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
+            .into_iter()
+            .chain(r.normal.map(f32::to_bits))
+            .for_each(&mut eat);
+    }
+    let Info {
+        n_seeds,
+        n_draws,
+        n_relaxations,
+        t_sigma_used,
+        n_regions_grown,
+        n_merged,
+        n_merge_passes,
+        n_dropped,
+        n_filled_px,
+        n_regions,
+        n_unlabelled_valid_px,
+    } = *info;
+    [
+        n_seeds,
+        n_draws,
+        n_relaxations,
+        t_sigma_used.to_bits(),
+        n_regions_grown,
+        n_merged,
+        n_merge_passes,
+        n_dropped,
+        n_filled_px,
+        n_regions,
+        n_unlabelled_valid_px,
+    ]
+    .into_iter()
+    .for_each(&mut eat);
+    h
+}
+
+/// Pins the exact output (labels, C1, regions, `Info`) of six setups covering both modes, both
+/// connectivities, the ABW, pinhole and grid cameras, 8-bit-like quantised data, strided seeds,
+/// relaxation and both C1 variants. Speed work must keep these hashes; a deliberate change of
+/// the output updates them (and says so in its commit).
+#[test]
+fn outputs_are_pinned_on_six_setups() {
+    let abw = abw_like_scene(256);
+    // Quantised to integer range steps (staircases, as in 8-bit ABW images).
+    let q = abw.range.map(|v| v.round());
+    let quant = crate::testutil::Scene { features: crate::testutil::features(&q), range: q };
+    let boxes = box_scene();
+    let pin = Camera::Pinhole { fx: 60.0, fy: 60.0, cx: 32.0, cy: 32.0, depth_scale: 1.0 };
+    let setups: [(&str, &crate::testutil::Scene, Camera, Params, u64); 6] = [
+        ("default abw0", &abw, Camera::ABW0, Params::default(), 0),
+        (
+            "default 8-conn one-sided abw1",
+            &abw,
+            Camera::ABW1,
+            Params { connectivity: 8, c1_one_sided: true, ..Params::default() },
+            5,
+        ),
+        ("paper abw0", &abw, Camera::ABW0, Params::paper(), 0),
+        (
+            "default quantised strided relaxed",
+            &quant,
+            Camera::ABW0,
+            Params { seed_stride_px: 3, min_seeds: 60, fill_unlabelled: false, ..Params::default() },
+            11,
+        ),
+        ("default quantised", &quant, Camera::ABW0, Params::default(), 2),
+        ("pinhole and grid", &boxes, pin, Params { max_residual: 1.0, ..small_params() }, 1),
+    ];
+    let got: Vec<(&str, u64)> = setups
+        .iter()
+        .map(|(name, s, cam, params, seed)| {
+            let (seg, info) = grow(&s.range, &s.features, cam, params, *seed);
+            let mut h = output_hash(&seg, &info);
+            if *name == "pinhole and grid" {
+                let (seg, info) = grow(&s.range, &s.features, &Camera::Grid, params, *seed);
+                h ^= output_hash(&seg, &info).rotate_left(1);
+            }
+            (*name, h)
+        })
+        .collect();
+    let want: [(&str, u64); 6] = [
+        ("default abw0", 0x3f4b79f4138a537c),
+        ("default 8-conn one-sided abw1", 0xd0aaa9ef2af94282),
+        ("paper abw0", 0xeaf9c43cecf4acd8),
+        ("default quantised strided relaxed", 0x2ac4a55aa6e1b16),
+        ("default quantised", 0x44386b744fb5a9b9),
+        ("pinhole and grid", 0xd301003949c91335),
+    ];
+    assert_eq!(got, want, "outputs changed:\n{got:#x?}");
+}
