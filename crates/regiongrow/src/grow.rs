@@ -542,6 +542,19 @@ fn normal_with<P: Proj>(proj: &P, x: f64, y: f64, v: f64, a: f64, b: f64) -> Opt
     Some((nrm, c.abs()))
 }
 
+/// The region size at which the plane is refitted next, after a refit at `last` pixels: the
+/// least `count > last` with `count − last ≥ max(refit_min, count / 4)`. The condition stays true
+/// from there on (its left side grows by one per pixel, its right side by at most one).
+fn refit_due(last: usize, refit_min: usize) -> usize {
+    let ok = |d: usize| d >= refit_min && d >= (last + d) / 4;
+    // `d = ⌈last / 3⌉` satisfies `d ≥ (last + d) / 4`; the least solution is at most two below.
+    let mut d = refit_min.max(last.div_ceil(3)).max(1);
+    while d > 1 && ok(d - 1) {
+        d -= 1;
+    }
+    last + d
+}
+
 /// Default mode: grows region `id` from `seed` with the curvedness, normal-angle and plane
 /// residual tests, refitting the region plane on an amortised schedule. `N` = connectivity.
 fn grow_default<const N: usize>(
@@ -567,7 +580,8 @@ fn grow_default<const N: usize>(
     let mut mom = Moments::default();
     let mut summed = 0usize;
     let mut count = 1usize;
-    let mut last_refit = 0usize;
+    // The plane is refitted when the region reaches `due` pixels (see [`refit_due`]).
+    let mut due = refit_due(0, refit_min);
     let mut head = 0;
     while head < queue.len() {
         let i = queue[head] as usize;
@@ -588,7 +602,7 @@ fn grow_default<const N: usize>(
             labels[j] = id;
             queue.push(j as u32);
             count += 1;
-            if count - last_refit >= refit_min.max(count / 4) {
+            if count >= due {
                 for &p in &queue[summed..] {
                     mom.add(point_of(&geo[p as usize]));
                 }
@@ -596,7 +610,7 @@ fn grow_default<const N: usize>(
                 if let Some(p) = mom.fit(|p| ctx.toward(p)) {
                     plane = p;
                 }
-                last_refit = count;
+                due = refit_due(count, refit_min);
             }
         }
     }
@@ -855,6 +869,17 @@ mod tests {
                 assert_relative_eq!(n[c], n_ref[c], epsilon = 1e-12);
             }
             assert_relative_eq!(n[2], c_ref, epsilon = 1e-12);
+        }
+    }
+
+    /// The closed form of the refit schedule equals its definition, checked count by count.
+    #[test]
+    fn refit_due_is_the_first_count_meeting_the_schedule() {
+        for refit_min in [1usize, 2, 3, 16, 50] {
+            for last in 0..5000usize {
+                let first = (last + 1..).find(|&c| c - last >= refit_min.max(c / 4)).unwrap();
+                assert_eq!(refit_due(last, refit_min), first, "last {last}, refit_min {refit_min}");
+            }
         }
     }
 
