@@ -474,9 +474,11 @@ pub(crate) fn run(
         }
     }
     info.n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
+    // The labels still in the image.
+    let used: Vec<bool> = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
 
     if params.fill_unlabelled {
-        info.n_filled_px = fill(&ctx, params, &stats, &mut labels, &mut queue);
+        info.n_filled_px = fill(&ctx, params, &stats, &used, &mut labels, &mut queue);
     }
 
     // Final statistics under the current labels, then relabel 1..n in raster order of first
@@ -703,19 +705,23 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
 }
 
 /// Gives unlabelled valid pixels to the 4-adjacent region whose plane is nearest (if within
-/// `fill_max_residual`), flooding breadth-first from the region borders. Returns the pixel count.
-fn fill(ctx: &Ctx<'_>, params: &Params, stats: &[Stats], labels: &mut [u32], queue: &mut Vec<u32>) -> u32 {
+/// `fill_max_residual`), flooding breadth-first from the region borders. `used[l]`: label `l`
+/// occurs in `labels`. Returns the pixel count.
+fn fill(
+    ctx: &Ctx<'_>,
+    params: &Params,
+    stats: &[Stats],
+    used: &[bool],
+    labels: &mut [u32],
+    queue: &mut Vec<u32>,
+) -> u32 {
     let max_res = f64::from(params.fill_max_residual);
     let offs: [isize; 4] = std::array::from_fn(|d| ctx.offs[d]);
     let geo = &ctx.geo[..];
     // Planes of the surviving regions (fitted in both modes: this step is geometric).
-    let mut used = vec![false; stats.len()];
-    for &l in labels.iter() {
-        used[l as usize] = true;
-    }
     let planes: Vec<Option<Plane>> = stats
         .iter()
-        .zip(&used)
+        .zip(used)
         .map(|(s, &u)| if u && s.count >= 3 { s.mom.fit(|p| ctx.toward(p)) } else { None })
         .collect();
     // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
