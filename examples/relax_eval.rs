@@ -10,8 +10,10 @@
 //!
 //! ```text
 //! cargo run --release --example relax_eval -- [--s1 curvedness|k] [--t-d 3] [--lambda 1] [--delta 0.7] [--sweeps 7] [--gap 2] [--min-region 50]
-//!     [--mode regions|components] [--no-unlabelled-core] [--support 0.3] [--merge-angle 10] [--merge-residual 2] [--tune]
+//!     [--mode regions|components] [--no-unlabelled-core] [--support 0.3] [--merge-angle 10] [--merge-residual 2] [--support-px 2] [--no-merge-within] [--rms-ratio 1.5] [--seg-supported] [--tune]
 //! ```
+//! `ONLY=i` in the environment restricts the run to `abw.train.i`. `--seg-supported` gives the final
+//! segmentation the support-tested edge map instead of the full relaxed sets (the pipeline's choice).
 //! `--tune` sweeps `t_d_px × lambda` on the training split and prints one summary line per pair.
 #![allow(clippy::print_stdout)] // an example reports on stdout
 
@@ -73,16 +75,18 @@ fn prepare(index: u32, use_k: bool) -> Prepared {
     }
 }
 
-fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams) -> Row {
+fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams, seg_supported: bool) -> Row {
     let (r, info) = relax::relax(&p.c1, &p.s1, &p.c2, &p.magnitude, &p.valid, params, 0);
-    let (labels, regions) = relax::final_segmentation(&p.range, &p.camera, &r.edges, Some(&p.rg_labels), sp);
+    let seg_edges = if seg_supported { r.edges.clone() } else { r.union() };
+    let (labels, regions) =
+        relax::final_segmentation(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), sp);
     let other_mode = match sp.mode {
         relax::SegmentMode::Regions => relax::SegmentMode::Components,
         relax::SegmentMode::Components => relax::SegmentMode::Regions,
     };
     let sp_other = relax::SegmentParams { mode: other_mode, ..sp.clone() };
     let (labels_other, _) =
-        relax::final_segmentation(&p.range, &p.camera, &r.edges, Some(&p.rg_labels), &sp_other);
+        relax::final_segmentation(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), &sp_other);
     let f = |e: &EdgeMap| eval::boundary::matched(e, &p.gt, 2.0).f;
     let pp = |e: &EdgeMap| eval::paper_precision(e, &p.c1, 2.0).unwrap_or(f64::NAN);
     let nz = eval::Convention::NonZero;
@@ -117,7 +121,7 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 fn main() -> Result<()> {
     let mut params = relax::Params::default();
     let mut sp = relax::SegmentParams::default();
-    let (mut tune, mut use_k) = (false, false);
+    let (mut tune, mut use_k, mut seg_supported) = (false, false, false);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().with_context(|| format!("{name} needs a value"));
@@ -138,6 +142,10 @@ fn main() -> Result<()> {
                 }
             }
             "--no-unlabelled-core" => sp.unlabelled_core = false,
+            "--support-px" => params.support_px = value("--support-px")?.parse()?,
+            "--no-merge-within" => sp.merge_within_region = false,
+            "--rms-ratio" => sp.within_max_rms_ratio = value("--rms-ratio")?.parse()?,
+            "--seg-supported" => seg_supported = true,
             "--support" => sp.min_border_support = value("--support")?.parse()?,
             "--merge-angle" => sp.merge_max_angle_deg = value("--merge-angle")?.parse()?,
             "--merge-residual" => sp.merge_max_residual = value("--merge-residual")?.parse()?,
@@ -146,14 +154,21 @@ fn main() -> Result<()> {
     }
     params.validate().map_err(anyhow::Error::msg)?;
     sp.validate().map_err(anyhow::Error::msg)?;
-    let images: Vec<Prepared> = (0..10u32).into_par_iter().map(|i| prepare(i, use_k)).collect();
+    let only: Option<u32> = std::env::var("ONLY").ok().map(|v| v.parse().unwrap());
+    let images: Vec<Prepared> = (0..10u32)
+        .filter(|i| only.is_none_or(|o| o == *i))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|i| prepare(i, use_k))
+        .collect();
     println!("s1 = {}", if use_k { "|K|" } else { "curvedness" });
     if tune {
         println!("t_d  lambda | F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG  final (of GT)");
         for t_d in [1.5, 2.0, 3.0, 4.0] {
             for lambda in [0.0, 0.3, 1.0, 3.0] {
                 let p = relax::Params { t_d_px: t_d, lambda, ..params.clone() };
-                let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &p, &sp)).collect();
+                let rows: Vec<Row> =
+                    images.par_iter().map(|im| evaluate(im, &p, &sp, seg_supported)).collect();
                 println!(
                     "{t_d:<4} {lambda:<6} | {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:.2}  {:.2}  ({:.2})",
                     mean(rows.iter().map(|r| r.f_c2)),
@@ -173,7 +188,7 @@ fn main() -> Result<()> {
     println!(
         "image         | F(C1)  F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG final /GT | #RG #fin | rm C1 rm C2 sweeps E0 -> E1"
     );
-    let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &params, &sp)).collect();
+    let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &params, &sp, seg_supported)).collect();
     for (im, r) in images.iter().zip(&rows) {
         println!(
             "{:<13} | {:.4} {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:>3} {:>3} /{:<3} | {:>3} {:>3} | {:>5} {:>5} {:>3} {:.0} -> {:.0}",

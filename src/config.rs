@@ -101,10 +101,12 @@ impl Default for Config {
 
 impl Config {
     /// The configuration faithful to the paper (`configs/paper.toml`): Gaussian-curvature growth, |K| as the
-    /// strength of C1 points, and the final segmentation as plain connected components of the non-edge pixels.
+    /// strength of C1 points, no final support test of C2, and the final segmentation as plain connected
+    /// components of the non-edge pixels.
     pub fn paper() -> Self {
         let mut c = Self::default();
         c.pipeline.c1_strength = C1Strength::AbsK;
+        c.relax.support_px = 0.0;
         c.regiongrow = regiongrow::Params::paper();
         c.segment.mode = relax::SegmentMode::Components;
         c

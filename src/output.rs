@@ -57,6 +57,7 @@ pub fn write_outputs(
         "relax": {
             "removed_c1": info.removed_c1,
             "removed_c2": info.removed_c2,
+            "unsupported_c2": info.unsupported_c2,
             "energy_before": info.energy_before,
             "energy_after": info.energy_after,
             "sweeps": info.sweeps,

@@ -103,8 +103,10 @@ pub fn finish(
         let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
         (relaxed, relax::Info::default())
     };
+    // The segmentation sees both relaxed sets in full (before the support test): a border between
+    // two faces that region growing merged has only C2 to show it.
     let (labels, final_regions) =
-        relax::final_segmentation(range, camera, &relaxed.edges, Some(&regions.labels), &config.segment);
+        relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
     Finish { relaxed, relax_info, labels, final_regions }
 }
 

@@ -37,6 +37,16 @@ pub struct SegmentParams {
     /// `regions` mode: two adjacent regions may merge only if less than this fraction of their
     /// border pixels lie within 1 px (8-neighbourhood) of an edge pixel. In 0..=1.
     pub min_border_support: f64,
+    /// `regions` mode: two adjacent pieces of one region-growing region merge when their planes
+    /// agree, however strongly the edges support the border between them (edges inside a face
+    /// must not split it; a split needs a change of plane). `false` = only weakly supported
+    /// borders are merge candidates.
+    pub merge_within_region: bool,
+    /// `regions` mode, `merge_within_region`: two pieces of one region-growing region over a
+    /// supported border merge only if the RMS distance of each one's core points to the other's
+    /// plane is at most this multiple of its RMS distance to its own plane (they lie on one plane
+    /// within noise; a small step between parallel faces is a real border). ≥ 1.
+    pub within_max_rms_ratio: f64,
     /// `regions` mode: largest angle between the two regions' 3D plane normals for a merge.
     pub merge_max_angle_deg: f64,
     /// `regions` mode: largest RMS distance of each region's core points to the other region's
@@ -52,6 +62,8 @@ impl Default for SegmentParams {
             gap_close_px: 2.0,
             unlabelled_core: true,
             min_border_support: 0.3,
+            merge_within_region: true,
+            within_max_rms_ratio: 1.5,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 2.0,
         }
@@ -71,6 +83,12 @@ impl SegmentParams {
             return Err(format!(
                 "segment.min_border_support must be in 0..=1, got {}",
                 self.min_border_support
+            ));
+        }
+        if !(self.within_max_rms_ratio.is_finite() && self.within_max_rms_ratio >= 1.0) {
+            return Err(format!(
+                "segment.within_max_rms_ratio must be finite and ≥ 1, got {}",
+                self.within_max_rms_ratio
             ));
         }
         if !(0.0..=90.0).contains(&self.merge_max_angle_deg) {
@@ -212,7 +230,11 @@ const NBR8: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1,
 ///    `merge_max_angle_deg`, RMS distance of each one's core points to the other's plane ≤
 ///    `merge_max_residual`) are merged: union-find over the adjacent pairs in sorted order,
 ///    planes refitted on merge, passes repeated until none merges (support is per original
-///    pair; the plane test uses the current merged groups).
+///    pair; the plane test uses the current merged groups). With `merge_within_region`, two
+///    adjacent pieces of one region-growing region (label ≠ 0) are candidates whatever the
+///    support, if their planes agree as above and, for a supported border, each piece's RMS
+///    distance to the other's plane is at most `within_max_rms_ratio` times its own RMS: edges
+///    inside a face split it only where the geometry changes.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -264,6 +286,15 @@ pub fn final_segmentation(
 
     // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
     let keep: Vec<bool> = sizes.iter().map(|&n| u64::from(n) >= u64::from(params.min_region_px)).collect();
+    // The region-growing label of each component (all its pixels share one; 0 without a guide).
+    let mut comp_guide = vec![0u32; sizes.len()];
+    if let Some(g) = guide {
+        for (&c, &l) in comp.iter().zip(g) {
+            if c != 0 {
+                comp_guide[c as usize - 1] = l;
+            }
+        }
+    }
     let mut moments: Vec<Moments> = vec![Moments::default(); sizes.len()];
     // Runs of one component are summed in a local copy of its moments (the same additions in
     // the same order, but in registers).
@@ -355,7 +386,18 @@ pub fn final_segmentation(
     // 4. Merge adjacent regions over unsupported borders with agreeing planes.
     let mut parent: Vec<u32> = (0..=planes.len() as u32).collect();
     if guide.is_some() {
-        merge_unsupported(&comp, edges, w, h, &mut parent, &mut moments, &mut planes, camera, params);
+        merge_unsupported(
+            &comp,
+            &comp_guide,
+            edges,
+            w,
+            h,
+            &mut parent,
+            &mut moments,
+            &mut planes,
+            camera,
+            params,
+        );
     }
 
     // 5. Consecutive labels in raster order; region statistics.
@@ -512,11 +554,14 @@ fn count_labels(labels: &[u32], sizes: &mut [u32]) {
 }
 
 /// Step 4 of [`final_segmentation`]: union-find merging of adjacent components (labels in
-/// `comp`, 1-based into `moments`/`planes`) over borders weakly supported by `edges`. Roots are
+/// `comp`, 1-based into `moments`/`planes`, region-growing label of each in `comp_guide`) over
+/// borders weakly supported by `edges` or, with `merge_within_region`, inside one
+/// region-growing region. Roots are
 /// the smaller label; the root's moments and plane become the merged group's.
 #[allow(clippy::too_many_arguments)]
 fn merge_unsupported(
     comp: &[u32],
+    comp_guide: &[u32],
     edges: &EdgeMap,
     w: usize,
     h: usize,
@@ -569,17 +614,26 @@ fn merge_unsupported(
             }
         }
     }
-    let candidates: Vec<(u32, u32)> = pairs
+    // Candidates: weakly supported borders, and (with merge_within_region) any border between
+    // two pieces of one region-growing region; `weak` tells which.
+    let (candidates, weak): (Vec<(u32, u32)>, Vec<bool>) = pairs
         .iter()
-        .filter(|&(_, &(n, s))| f64::from(s) < params.min_border_support * f64::from(n))
-        .map(|(&k, _)| k)
-        .collect();
+        .filter_map(|(&(a, b), &(n, s))| {
+            let weak = f64::from(s) < params.min_border_support * f64::from(n);
+            let same_region = params.merge_within_region && {
+                let g = comp_guide[a as usize - 1];
+                g != 0 && g == comp_guide[b as usize - 1]
+            };
+            (weak || same_region).then_some(((a, b), weak))
+        })
+        .unzip();
+    let k2 = params.within_max_rms_ratio * params.within_max_rms_ratio;
     let cos_max = params.merge_max_angle_deg.to_radians().cos();
     let r2 = params.merge_max_residual * params.merge_max_residual;
     let mut merges = 0u32;
     loop {
         let mut changed = false;
-        for &(a, b) in &candidates {
+        for (k, &(a, b)) in candidates.iter().enumerate() {
             let (ra, rb) = (find(parent, a), find(parent, b));
             if ra == rb {
                 continue;
@@ -587,10 +641,14 @@ fn merge_unsupported(
             let (ia, ib) = (ra as usize - 1, rb as usize - 1);
             let (pa, pb) = (planes[ia].expect("kept region"), planes[ib].expect("kept region"));
             let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
-            if dot.abs() < cos_max
-                || moments[ia].mean_sq_residual(&pb) > r2
-                || moments[ib].mean_sq_residual(&pa) > r2
-            {
+            let (ea, eb) = (moments[ia].mean_sq_residual(&pb), moments[ib].mean_sq_residual(&pa));
+            if dot.abs() < cos_max || ea > r2 || eb > r2 {
+                continue;
+            }
+            // (+1e-12: noise-free pieces of one plane have RMS 0 and rounding-level residuals.)
+            if !weak[k] && (ea > k2 * pa.rms * pa.rms + 1e-12 || eb > k2 * pb.rms * pb.rms + 1e-12) {
+                // Within one region-growing region over a supported border: merge only pieces
+                // that lie on one plane within their own noise.
                 continue;
             }
             let (root, other) = (ra.min(rb), ra.max(rb));
@@ -840,6 +898,32 @@ mod tests {
         assert_eq!(regions.len(), 2);
     }
 
+    #[test]
+    fn regions_mode_rejoins_pieces_of_one_region_split_by_interior_edges_on_one_plane_only() {
+        // Region growing found one region; an edge line inside it splits it in two.
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let one = |range: &RangeImage| range.map(|v| u32::from(v.is_finite()));
+        let count = |range: &RangeImage, sp: &SegmentParams| {
+            final_segmentation(range, &Camera::Grid, &edges, Some(&one(range)), sp).1.len()
+        };
+        let plane = |x: u32, y: u32| 100.0 + 0.5 * x as f32 + 0.25 * y as f32;
+        let image = |f: &dyn Fn(u32, u32) -> f32| Grid::from_fn(40, 30, f);
+        let plane_img = image(&plane);
+        assert_eq!(count(&plane_img, &regions_mode()), 1, "one plane: the pieces rejoin");
+        let split = SegmentParams { merge_within_region: false, ..regions_mode() };
+        assert_eq!(count(&plane_img, &split), 2, "without merge_within_region the edges split it");
+        // Parallel planes one unit apart (within merge_max_residual = 2, far above their RMS of
+        // 0): a real step, kept.
+        let step = image(&|x, y| plane(x, y) + if x < 20 { 0.0 } else { 1.0 });
+        assert_eq!(count(&step, &regions_mode()), 2, "a step between parallel pieces stays");
+        // Two pieces of one noisy plane rejoin, a step of twice the noise does not.
+        let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.25 - 0.5;
+        let noisy = image(&|x, y| plane(x, y) + noise(x, y));
+        assert_eq!(count(&noisy, &regions_mode()), 1);
+        let noisy_step = image(&|x, y| plane(x, y) + noise(x, y) + if x < 20 { 0.0 } else { 0.7 });
+        assert_eq!(count(&noisy_step, &regions_mode()), 2);
+    }
+
     /// Reference labelling: flood fill from every unlabelled core pixel in raster order.
     fn components_by_flood_fill(core: &[bool], guide: Option<&[u32]>, w: usize, h: usize) -> Vec<u32> {
         let mut lab = vec![0u32; w * h];
@@ -908,6 +992,7 @@ mod tests {
         let c: SegmentParams = serde_json::from_str(r#"{"mode": "components"}"#).unwrap();
         assert_eq!(c.mode, SegmentMode::Components);
         assert!(SegmentParams { min_border_support: 1.5, ..p.clone() }.validate().is_err());
+        assert!(SegmentParams { within_max_rms_ratio: 0.5, ..p.clone() }.validate().is_err());
         assert!(SegmentParams { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
         assert!(SegmentParams { merge_max_residual: f64::NAN, ..p }.validate().is_err());
     }
