@@ -1,39 +1,54 @@
 //! Curvatures from the quadratic-fit derivatives, and the windowed standard deviation of K, one row at a time.
 
-/// K, H, principal curvatures `[k1, k2]` (k1 ≥ k2) and curvedness of one row of the graph surface from its
-/// derivatives (NaN propagates). All slices have the row's length.
+/// K, H and the half-difference `d = (k1 − k2)/2` of the principal curvatures at one pixel from its derivatives
+/// (NaN propagates).
 ///
 /// With `E = 1 + Ix²`, `F = Ix·Iy`, `G = 1 + Iy²`, `q = 1 + Ix² + Iy²` and `(L, M, N) = (Ixx, Ixy, Iyy)`:
-/// `K = (LN − M²)/q²`, `H = (EN − 2FM + GL)/(2q^{3/2})`, and the half-difference of the principal curvatures
-/// `d = sqrt(H² − K) = sqrt((EN − GL)² + 4(EM − FL)(GM − FN)) / (2q^{3/2})`. The last form has no cancellation
-/// at umbilics (where `H² ≈ K`), so f32 keeps `k1,2 = H ± d` accurate there. Curvedness `sqrt((k1² + k2²)/2) =
-/// sqrt(H² + d²)`.
+/// `K = (LN − M²)/q²`, `H = (EN − 2FM + GL)/(2q^{3/2})`, and `d = sqrt(H² − K) = sqrt((EN − GL)² + 4(EM − FL)(GM −
+/// FN)) / (2q^{3/2})`. The last form has no cancellation at umbilics (where `H² ≈ K`), so f32 keeps `k1,2 = H ± d`
+/// accurate there. Curvedness `sqrt((k1² + k2²)/2) = sqrt(H² + d²)`.
+#[inline(always)]
+fn khd(ix: f32, iy: f32, l: f32, m: f32, nn: f32) -> (f32, f32, f32) {
+    let (e, f, g) = (1.0 + ix * ix, ix * iy, 1.0 + iy * iy);
+    let inv_q = 1.0 / (1.0 + ix * ix + iy * iy);
+    let s = inv_q * inv_q.sqrt();
+    let k = (l * nn - m * m) * (inv_q * inv_q);
+    let h = 0.5 * (e * nn - 2.0 * f * m + g * l) * s;
+    let (a, b) = (e * nn - g * l, 4.0 * (e * m - f * l) * (g * m - f * nn));
+    let d = 0.5 * (a * a + b).max(0.0).sqrt() * s;
+    (k, h, d)
+}
+
+/// K, H and curvedness of one row from its derivatives `[Ix, Iy]` and `[Ixx, Ixy, Iyy]` (see [`khd`]); all slices
+/// have the row's length.
 pub(crate) fn curvature_row(
     grad: &[[f32; 2]],
     hess: &[[f32; 3]],
     k_out: &mut [f32],
     h_out: &mut [f32],
-    principal: &mut [[f32; 2]],
     curvedness: &mut [f32],
 ) {
     let n = grad.len();
-    let (hess, k_out, h_out) = (&hess[..n], &mut k_out[..n], &mut h_out[..n]);
-    let (principal, curvedness) = (&mut principal[..n], &mut curvedness[..n]);
+    let (hess, k_out, h_out, curvedness) =
+        (&hess[..n], &mut k_out[..n], &mut h_out[..n], &mut curvedness[..n]);
     for i in 0..n {
-        let [ix, iy] = grad[i];
-        let [l, m, nn] = hess[i];
-        let (e, f, g) = (1.0 + ix * ix, ix * iy, 1.0 + iy * iy);
-        let inv_q = 1.0 / (1.0 + ix * ix + iy * iy);
-        let s = inv_q * inv_q.sqrt();
-        let k = (l * nn - m * m) * (inv_q * inv_q);
-        let h = 0.5 * (e * nn - 2.0 * f * m + g * l) * s;
-        let (a, b) = (e * nn - g * l, 4.0 * (e * m - f * l) * (g * m - f * nn));
-        let d = 0.5 * (a * a + b).max(0.0).sqrt() * s;
+        let ([ix, iy], [l, m, nn]) = (grad[i], hess[i]);
+        let (k, h, d) = khd(ix, iy, l, m, nn);
         k_out[i] = k;
         h_out[i] = h;
-        principal[i] = [h + d, h - d];
         curvedness[i] = (h * h + d * d).sqrt();
     }
+}
+
+/// The principal curvatures `[k1, k2] = [H + d, H − d]` (k1 ≥ k2) of every pixel from its derivatives (see [`khd`]).
+pub(crate) fn principal(grad: &[[f32; 2]], hess: &[[f32; 3]]) -> Vec<[f32; 2]> {
+    grad.iter()
+        .zip(hess)
+        .map(|(&[ix, iy], &[l, m, nn])| {
+            let (_, h, d) = khd(ix, iy, l, m, nn);
+            [h + d, h - d]
+        })
+        .collect()
 }
 
 /// Streaming standard deviation of the finite values of K over a `w × w` window (clipped at the border).

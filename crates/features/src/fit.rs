@@ -14,6 +14,8 @@
 //! into three passes per row with the window loop unrolled (same arithmetic in the same order, so bit-identical).
 //! The cost per pixel is O(w) with a small constant (separable filters). A window containing no-data (NaN or ±∞)
 //! makes some moment non-finite, which sends the pixel to the general path: no-data never enters a fast fit.
+//! In the plane-only mode ([`Fit::Plane`], for `fit_planes` and a plane window that differs from the
+//! derivative window) the quadratic's moments and solves are skipped.
 //!
 //! **General path** (windows clipped by the border or holding no-data): the plane and the quadratic are fitted to the
 //! window's valid pixels alone (window coordinates, depths relative to the centre pixel, f64). If the window clipped
@@ -24,6 +26,17 @@
 
 use crate::plane;
 use crate::quadratic::{SgKernels, basis, cholesky_solve};
+
+/// What a [`RowFitter`] fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Fit {
+    /// The plane and the quadratic's derivatives.
+    Quadratic,
+    /// The plane alone: the fast path skips the quadratic's moments and the general path its `LDLᵀ` solve. The
+    /// planes are bit-identical to [`Fit::Quadratic`]'s (same arithmetic); the only difference is which windows go
+    /// to the general path when a quadratic moment overflows f32 with finite depths (|z| ≳ 1e36).
+    Plane,
+}
 
 /// Streams the fits of one window size over an image, output row by output row (rows in increasing order).
 pub(crate) struct RowFitter<'a> {
@@ -68,6 +81,8 @@ pub(crate) struct RowFitter<'a> {
     chk: Vec<f32>,
     /// Which code computes the full windows.
     path: Path,
+    /// Whether the derivatives are fitted too.
+    fit: Fit,
     /// Kernels of the clipped-window rectangles met so far, indexed by the rectangle (empty until first needed).
     shapes: Vec<Option<ShapeKernel>>,
 }
@@ -99,7 +114,7 @@ const NAN_FIT: PixelFit = PixelFit { plane: [f32::NAN; 3], grad: [f32::NAN; 2], 
 
 impl<'a> RowFitter<'a> {
     /// Prepares the fits of `window_px × window_px` windows over `src` (`wu × hu`, row-major).
-    pub(crate) fn new(src: &'a [f32], wu: usize, hu: usize, window_px: u32, path: Path) -> Self {
+    pub(crate) fn new(src: &'a [f32], wu: usize, hu: usize, window_px: u32, path: Path, fit: Fit) -> Self {
         assert_eq!(src.len(), wu * hu, "image size");
         let k = SgKernels::new(window_px);
         let r = window_px as usize / 2;
@@ -167,6 +182,7 @@ impl<'a> RowFitter<'a> {
             mom: std::array::from_fn(|_| vec![0.0; m]),
             chk: vec![0.0; m],
             path,
+            fit,
             shapes: Vec::new(),
         }
     }
@@ -258,7 +274,8 @@ impl<'a> RowFitter<'a> {
         }
     }
 
-    /// Fits output row `y` (rows must come in increasing order) into the three row slices (length `wu`).
+    /// Fits output row `y` (rows must come in increasing order) into the three row slices (length `wu`); `grad`
+    /// and `hess` are left as they are for [`Fit::Plane`].
     pub(crate) fn row(
         &mut self,
         y: usize,
@@ -273,10 +290,13 @@ impl<'a> RowFitter<'a> {
         if fast_row {
             (fast_lo, fast_hi) = (r, wu - r);
             let (p, g, h) = (&mut plane[r..wu - r], &mut grad[r..wu - r], &mut hess[r..wu - r]);
-            match (self.path, r) {
-                (Path::Fast, 1) => self.fused::<1, 3>(y, p, g, h),
-                (Path::Fast, 2) => self.fused::<2, 5>(y, p, g, h),
-                (Path::Fast, 3) => self.fused::<3, 7>(y, p, g, h),
+            match (self.path, self.fit, r) {
+                (Path::Fast, Fit::Quadratic, 1) => self.fused::<1, 3, true>(y, p, g, h),
+                (Path::Fast, Fit::Quadratic, 2) => self.fused::<2, 5, true>(y, p, g, h),
+                (Path::Fast, Fit::Quadratic, 3) => self.fused::<3, 7, true>(y, p, g, h),
+                (Path::Fast, Fit::Plane, 1) => self.fused::<1, 3, false>(y, p, g, h),
+                (Path::Fast, Fit::Plane, 2) => self.fused::<2, 5, false>(y, p, g, h),
+                (Path::Fast, Fit::Plane, 3) => self.fused::<3, 7, false>(y, p, g, h),
                 _ => {
                     while self.next_row <= y + r {
                         self.row_pass(self.next_row);
@@ -288,16 +308,33 @@ impl<'a> RowFitter<'a> {
             }
         }
         for x in (0..fast_lo).chain(fast_hi..wu) {
-            (plane[x], grad[x], hess[x]) = self.general(x, y);
+            let f = self.general_fit(x, y);
+            self.put(x, f, plane, grad, hess);
         }
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
         if fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
             for x in fast_lo..fast_hi {
                 if !self.chk[x - r].is_finite() {
-                    (plane[x], grad[x], hess[x]) = self.general(x, y);
+                    let f = self.general_fit(x, y);
+                    self.put(x, f, plane, grad, hess);
                 }
             }
+        }
+    }
+
+    /// Stores one pixel's fit at column `x`.
+    fn put(
+        &self,
+        x: usize,
+        f: PixelFit,
+        plane: &mut [[f32; 3]],
+        grad: &mut [[f32; 2]],
+        hess: &mut [[f32; 3]],
+    ) {
+        plane[x] = f.plane;
+        if self.fit == Fit::Quadratic {
+            (grad[x], hess[x]) = (f.grad, f.hess);
         }
     }
 
@@ -314,24 +351,35 @@ impl<'a> RowFitter<'a> {
         let (m00, m10, m01, m20, m11, m02) =
             (&m00[..m], &m10[..m], &m01[..m], &m20[..m], &m11[..m], &m02[..m]);
         let chk = &mut self.chk[..m];
-        let (plane, grad, hess) = (&mut plane[..m], &mut grad[..m], &mut hess[..m]);
+        let plane = &mut plane[..m];
+        let quad = self.fit == Fit::Quadratic;
         for i in 0..m {
             let (c1, c2) = (g[0] * m10[i], g[1] * m01[i]);
-            let (c3, c4, c5) = (g[2] * m20[i], g[3] * m11[i], g[4] * m02[i]);
             let c = f64::from(zc[i]) + gd[2] * f64::from(m00[i])
                 - gd[0] * f64::from(m10[i]) * xoff[i]
                 - gd[1] * f64::from(m01[i]) * y0;
             plane[i] = [c1, c2, c as f32];
-            grad[i] = [c1, c2];
-            hess[i] = [2.0 * c3, c4, 2.0 * c5];
-            chk[i] = m00[i] + m10[i] + m01[i] + m20[i] + m11[i] + m02[i];
+            chk[i] = if quad {
+                m00[i] + m10[i] + m01[i] + m20[i] + m11[i] + m02[i]
+            } else {
+                m00[i] + m10[i] + m01[i]
+            };
+        }
+        if quad {
+            let (grad, hess) = (&mut grad[..m], &mut hess[..m]);
+            for i in 0..m {
+                grad[i] = [g[0] * m10[i], g[1] * m01[i]];
+                let (c3, c4, c5) = (g[2] * m20[i], g[3] * m11[i], g[4] * m02[i]);
+                hess[i] = [2.0 * c3, c4, 2.0 * c5];
+            }
         }
     }
 
     /// The fast path of output row `y` for a window of `2R + 1 = W` pixels: the same arithmetic, in the same order,
     /// as `row_pass` + `moments` + `fast_row`, but fused into three loops whose inner loops over the window are
-    /// unrolled (bit-identical results, far fewer memory passes).
-    fn fused<const R: usize, const W: usize>(
+    /// unrolled (bit-identical results, far fewer memory passes). `Q`: fit the quadratic too ([`Fit::Quadratic`]);
+    /// without it the quadratic's moments are not computed.
+    fn fused<const R: usize, const W: usize, const Q: bool>(
         &mut self,
         y: usize,
         plane: &mut [[f32; 3]],
@@ -353,7 +401,11 @@ impl<'a> RowFitter<'a> {
             let r0 = &mut self.ring_r0[slot..slot + m];
             let zs: [&[f32]; W] = std::array::from_fn(|j| &z[j..j + m]);
             for i in 0..m {
-                (h1[i], hp[i], r0[i]) = symmetric_taps::<R, W>(&zs, &pk, i);
+                let (a1, ap, a0) = symmetric_taps::<R, W>(&zs, &pk, i);
+                (h1[i], r0[i]) = (a1, a0);
+                if Q {
+                    hp[i] = ap;
+                }
             }
             self.next_row += 1;
         }
@@ -361,7 +413,11 @@ impl<'a> RowFitter<'a> {
         let rows: [&[f32]; W] = std::array::from_fn(|j| &src[(y + j - R) * wu..(y + j - R + 1) * wu]);
         let (v1, vp, c0) = (&mut self.v1[..wu], &mut self.vp[..wu], &mut self.c0[..wu]);
         for i in 0..wu {
-            (v1[i], vp[i], c0[i]) = symmetric_taps::<R, W>(&rows, &pk, i);
+            let (a1, ap, a0) = symmetric_taps::<R, W>(&rows, &pk, i);
+            (v1[i], c0[i]) = (a1, a0);
+            if Q {
+                vp[i] = ap;
+            }
         }
         // Column sums of the row passes, row box sums of the column-first pass, and the fits.
         let slot = |v: usize| ((y + v - R) % W) * m;
@@ -377,40 +433,45 @@ impl<'a> RowFitter<'a> {
         let (plane, grad, hess) = (&mut plane[..m], &mut grad[..m], &mut hess[..m]);
         let wf = W as f32;
         for i in 0..m {
-            let (mut m10, mut m20, mut m00, mut m11) = (h1s[R][i], hps[R][i], r0s[R][i], 0.0f32);
+            let (mut m10, mut m00) = (h1s[R][i], r0s[R][i]);
+            let (mut m20, mut m11) = if Q { (hps[R][i], 0.0f32) } else { (0.0, 0.0) };
             for k in 1..=R {
                 let (h1p, h1m) = (h1s[R + k][i], h1s[R - k][i]);
                 m10 += h1p + h1m;
-                m11 += k as f32 * (h1p - h1m);
-                m20 += hps[R + k][i] + hps[R - k][i];
+                if Q {
+                    m11 += k as f32 * (h1p - h1m);
+                    m20 += hps[R + k][i] + hps[R - k][i];
+                }
                 m00 += r0s[R + k][i] + r0s[R - k][i];
             }
-            let (vv1, vvp) = (&v1[i..i + W], &vp[i..i + W]);
-            let (mut m01, mut m02) = (vv1[0], vvp[0]);
+            let vv1 = &v1[i..i + W];
+            let mut m01 = vv1[0];
             for j in 1..W {
                 m01 += vv1[j];
-                m02 += vvp[j];
             }
             m00 += wf * c0[i + R];
             let (c1, c2) = (g[0] * m10, g[1] * m01);
-            let (c3, c4, c5) = (g[2] * m20, g[3] * m11, g[4] * m02);
             let c = f64::from(zc[i]) + gd[2] * f64::from(m00)
                 - gd[0] * f64::from(m10) * xoff[i]
                 - gd[1] * f64::from(m01) * y0;
             plane[i] = [c1, c2, c as f32];
-            grad[i] = [c1, c2];
-            hess[i] = [2.0 * c3, c4, 2.0 * c5];
-            chk[i] = m00 + m10 + m01 + m20 + m11 + m02;
+            if Q {
+                let vvp = &vp[i..i + W];
+                let mut m02 = vvp[0];
+                for j in 1..W {
+                    m02 += vvp[j];
+                }
+                let (c3, c4, c5) = (g[2] * m20, g[3] * m11, g[4] * m02);
+                grad[i] = [c1, c2];
+                hess[i] = [2.0 * c3, c4, 2.0 * c5];
+                chk[i] = m00 + m10 + m01 + m20 + m11 + m02;
+            } else {
+                chk[i] = m00 + m10 + m01;
+            }
         }
     }
 
-    /// Fits the plane and the quadratic to the valid pixels of the window around `(x, y)`.
-    fn general(&mut self, x: usize, y: usize) -> ([f32; 3], [f32; 2], [f32; 3]) {
-        let f = self.general_fit(x, y);
-        (f.plane, f.grad, f.hess)
-    }
-
-    /// [`Self::general`] as a [`PixelFit`].
+    /// Fits the plane and (for [`Fit::Quadratic`]) the quadratic to the valid pixels of the window around `(x, y)`.
     fn general_fit(&mut self, x: usize, y: usize) -> PixelFit {
         let (wu, hu, r) = (self.wu, self.hu, self.r as i64);
         let zc = self.src[y * wu + x];
@@ -487,7 +548,8 @@ impl<'a> RowFitter<'a> {
         }
         let sums = [n[0][0], n[1][0], n[2][0], n[1][1], n[2][1], n[2][2], rhs[0], rhs[1], rhs[2]];
         let plane = plane::solve(&sums);
-        let quad = (count >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs);
+        let quad =
+            (self.fit == Fit::Quadratic && count >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs);
         self.pixel_fit(x, y, zc, plane, quad)
     }
 
@@ -524,6 +586,7 @@ impl<'a> RowFitter<'a> {
         }
         let kernel = self.shapes[key].get_or_insert_with(|| ShapeKernel::new([ulo, uhi, vlo, vhi]));
         let (mut p, mut q) = ([0.0f64; 3], [0.0f64; 6]);
+        let quad = self.fit == Fit::Quadratic;
         let mut t = 0;
         for dv in vlo..=vhi {
             let row = &self.src[(y as i64 + dv) as usize * wu..];
@@ -533,17 +596,20 @@ impl<'a> RowFitter<'a> {
                     return None;
                 }
                 let z = f64::from(z) - zc;
-                let (kp, kq) = (&kernel.plane[t], &kernel.quad[t]);
+                let kp = &kernel.plane[t];
                 for i in 0..3 {
                     p[i] += kp[i] * z;
                 }
-                for i in 0..6 {
-                    q[i] += kq[i] * z;
+                if quad {
+                    let kq = &kernel.quad[t];
+                    for i in 0..6 {
+                        q[i] += kq[i] * z;
+                    }
                 }
                 t += 1;
             }
         }
-        let (has_plane, has_quad) = (kernel.has_plane, kernel.has_quad);
+        let (has_plane, has_quad) = (kernel.has_plane, quad && kernel.has_quad);
         Some(self.pixel_fit(x, y, zc, has_plane.then_some(p), has_quad.then_some(q)))
     }
 }

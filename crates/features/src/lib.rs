@@ -2,15 +2,20 @@
 //!
 //! - [`fit_planes`]: least-squares plane `z = a·x + b·y + c` per pixel over the valid pixels of a `w × w` window,
 //!   x and y measured from the image centre.
-//! - [`compute`]: the plane, the derivatives of a least-squares quadratic (2D Savitzky–Golay, kernels from faer's
-//!   QR), Gaussian and mean curvature, principal curvatures, curvedness and the windowed standard deviation of K.
+//! - [`compute`]: the [`SurfaceFeatures`] the later stages read: the plane, Gaussian and mean curvature (from the
+//!   derivatives of a least-squares quadratic, 2D Savitzky–Golay, kernels from faer's QR), curvedness and the
+//!   windowed standard deviation of K. The principal curvatures follow from H and K
+//!   ([`SurfaceFeatures::principal`]).
 //! - [`compute_into`]: the same into the grids of a previous result, reusing their memory (frame streams).
+//! - [`derivatives`]: the quadratic fit's first and second derivatives themselves, and from them the principal
+//!   curvatures without cancellation at umbilics ([`Derivatives::principal`]); [`compute`] uses them row by row
+//!   and keeps only the curvatures.
 //!
 //! All run one pass over the output rows (module `fit`): windows that are entirely valid and inside the image use
 //! separable f32 filters on differences of nearby depths (small constant cost per pixel); windows clipped by the
 //! border or holding no-data are fitted exactly to their valid pixels in f64. The curvatures (f32, in a form without
 //! cancellation at umbilics) and the running-sum standard deviation of K (f64 sums) follow in the same row loop,
-//! written straight into the output grids.
+//! written straight into the output grids. [`fit_planes`] runs the engine's plane-only mode.
 //! - [`shade`]: a Lambertian rendering for figures.
 //!
 //! No-data pixels (NaN) never enter a fit, and every output is NaN at no-data pixels.
@@ -76,8 +81,8 @@ pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
 }
 
 /// [`compute`] into the grids of `out`, reusing their memory: for a stream of frames of one size this saves the
-/// fresh zeroed pages the operating system hands out for every new set of output grids (about 40 % of the time of
-/// [`compute`] at 512×512 on our test machine). The result is bit-identical to [`compute`]; `out` may hold any size before.
+/// fresh zeroed pages the operating system hands out for every new set of output grids. The result is
+/// bit-identical to [`compute`]; `out` may hold any size before.
 ///
 /// # Panics
 /// If `params` is invalid (see [`Params::validate`]).
@@ -90,12 +95,20 @@ pub fn compute_into(range: &RangeImage, params: &Params, out: &mut SurfaceFeatur
     *out = compute_with(range, params, fit::Path::Fast, buffers);
 }
 
+/// Empties `g`'s vector and reserves room for `n` values (reusing its memory).
+fn empty<T>(g: Grid<T>, n: usize) -> Vec<T> {
+    let mut v = g.into_vec();
+    v.clear();
+    v.reserve(n);
+    v
+}
+
 /// [`compute`] without the checks; `path` selects the code of the full windows (the tests compare them); the
 /// output vectors reuse the memory of `reuse`'s grids.
 ///
-/// One pass over the output rows: the fits of row `y` (one engine, or two if the plane and the derivative windows
-/// differ), its curvatures, and the standard deviation of K of row `y − r` (r = half the K window), written straight
-/// into the output grids.
+/// One pass over the output rows: the fits of row `y` (one engine, or a second, plane-only one if the plane and
+/// the derivative windows differ), its curvatures from the engine's derivative rows, and the standard deviation of
+/// K of row `y − r` (r = half the K window), written straight into the output grids.
 fn compute_with(
     range: &RangeImage,
     params: &Params,
@@ -105,53 +118,37 @@ fn compute_with(
     let (w, h) = range.dimensions();
     let (wu, hu) = (w as usize, h as usize);
     let src = range.as_slice();
-    let mut quad = fit::RowFitter::new(src, wu, hu, params.deriv_window_px, path);
+    let mut quad = fit::RowFitter::new(src, wu, hu, params.deriv_window_px, path, fit::Fit::Quadratic);
     let mut plane_fitter = (params.window_px != params.deriv_window_px)
-        .then(|| fit::RowFitter::new(src, wu, hu, params.window_px, path));
+        .then(|| fit::RowFitter::new(src, wu, hu, params.window_px, path, fit::Fit::Plane));
     let mut kstd = curvature::WindowStd::new(wu, hu, params.k_std_window_px);
     let rk = (params.k_std_window_px / 2) as usize;
     let n = wu * hu;
-    fn empty<T>(g: Grid<T>, n: usize) -> Vec<T> {
-        let mut v = g.into_vec();
-        v.clear();
-        v.reserve(n);
-        v
-    }
-    let (mut plane, mut gradient, mut hessian) =
-        (empty(reuse.plane, n), empty(reuse.gradient, n), empty(reuse.hessian, n));
-    let (mut k, mut hm, mut principal, mut curvedness, mut k_std) = (
-        empty(reuse.k, n),
-        empty(reuse.h, n),
-        empty(reuse.principal, n),
-        empty(reuse.curvedness, n),
-        empty(reuse.k_std, n),
-    );
-    let (mut scratch_plane, mut scratch_grad, mut scratch_hess) =
-        (vec![[0.0f32; 3]; wu], vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
+    let mut plane = empty(reuse.plane, n);
+    let (mut k, mut hm, mut curvedness, mut k_std) =
+        (empty(reuse.k, n), empty(reuse.h, n), empty(reuse.curvedness, n), empty(reuse.k_std, n));
+    // One row of derivatives (the curvatures' input), and of the derivative window's planes if they are not kept.
+    let (mut grad, mut hess) = (vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
+    let mut scratch_plane = vec![[0.0f32; 3]; wu];
     let nan = f32::NAN;
     for y in 0..hu {
         let row = y * wu..(y + 1) * wu;
         plane.resize(row.end, [nan; 3]);
-        gradient.resize(row.end, [nan; 2]);
-        hessian.resize(row.end, [nan; 3]);
-        let (g, s) = (&mut gradient[row.clone()], &mut hessian[row.clone()]);
         match &mut plane_fitter {
-            None => quad.row(y, &mut plane[row.clone()], g, s),
+            None => quad.row(y, &mut plane[row.clone()], &mut grad, &mut hess),
             Some(pf) => {
-                quad.row(y, &mut scratch_plane, g, s);
-                pf.row(y, &mut plane[row.clone()], &mut scratch_grad, &mut scratch_hess);
+                quad.row(y, &mut scratch_plane, &mut grad, &mut hess);
+                pf.row(y, &mut plane[row.clone()], &mut grad, &mut hess);
             }
         }
         k.resize(row.end, nan);
         hm.resize(row.end, nan);
-        principal.resize(row.end, [nan; 2]);
         curvedness.resize(row.end, nan);
         curvature::curvature_row(
-            &gradient[row.clone()],
-            &hessian[row.clone()],
+            &grad,
+            &hess,
             &mut k[row.clone()],
             &mut hm[row.clone()],
-            &mut principal[row.clone()],
             &mut curvedness[row.clone()],
         );
         kstd.push_row(y, &k[row.clone()]);
@@ -168,13 +165,63 @@ fn compute_with(
     let grid = |v| Grid::from_vec(w, h, v).expect("size matches");
     SurfaceFeatures {
         plane: Grid::from_vec(w, h, plane).expect("size matches"),
-        gradient: Grid::from_vec(w, h, gradient).expect("size matches"),
-        hessian: Grid::from_vec(w, h, hessian).expect("size matches"),
         k: grid(k),
         h: grid(hm),
-        principal: Grid::from_vec(w, h, principal).expect("size matches"),
         curvedness: grid(curvedness),
         k_std: grid(k_std),
+    }
+}
+
+/// The first and second derivatives of the quadratic fit `z = c0 + c1x + c2y + c3x² + c4xy + c5y²` of every pixel
+/// (SPEC §3.1: `Ix = c1, Iy = c2, Ixx = 2c3, Ixy = c4, Iyy = 2c5`), from [`derivatives`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Derivatives {
+    /// First derivatives `[Ix, Iy]`.
+    pub gradient: Grid<[f32; 2]>,
+    /// Second derivatives `[Ixx, Ixy, Iyy]`.
+    pub hessian: Grid<[f32; 3]>,
+}
+
+impl Derivatives {
+    /// Principal curvatures `[k1, k2]` (k1 ≥ k2) of every pixel, in a form without cancellation at umbilics (its
+    /// H, and the K and curvedness from the same derivatives, are bit-identical to [`compute`]'s).
+    pub fn principal(&self) -> Grid<[f32; 2]> {
+        let (w, h) = self.gradient.dimensions();
+        let p = curvature::principal(self.gradient.as_slice(), self.hessian.as_slice());
+        Grid::from_vec(w, h, p).expect("size matches")
+    }
+}
+
+/// The quadratic fit's derivatives of every pixel over the valid pixels of its `deriv_window_px` window: the
+/// values [`compute`] derives K, H and curvedness from (bit-identical). NaN at no-data pixels and where the valid
+/// pixels do not determine a quadratic.
+///
+/// # Panics
+/// If `params` is invalid (see [`Params::validate`]).
+pub fn derivatives(range: &RangeImage, params: &Params) -> Derivatives {
+    let _s = tracing::info_span!("features::derivatives", w = range.width(), h = range.height()).entered();
+    if let Err(e) = params.validate() {
+        panic!("invalid features params: {e}");
+    }
+    derivatives_with(range, params.deriv_window_px, fit::Path::Fast)
+}
+
+/// [`derivatives`] without the checks, `path` as in [`compute_with`].
+fn derivatives_with(range: &RangeImage, window_px: u32, path: fit::Path) -> Derivatives {
+    let (w, h) = range.dimensions();
+    let (wu, hu) = (w as usize, h as usize);
+    let mut quad = fit::RowFitter::new(range.as_slice(), wu, hu, window_px, path, fit::Fit::Quadratic);
+    let mut scratch_plane = vec![[0.0f32; 3]; wu];
+    let (mut gradient, mut hessian) = (Vec::with_capacity(wu * hu), Vec::with_capacity(wu * hu));
+    for y in 0..hu {
+        let row = y * wu..(y + 1) * wu;
+        gradient.resize(row.end, [f32::NAN; 2]);
+        hessian.resize(row.end, [f32::NAN; 3]);
+        quad.row(y, &mut scratch_plane, &mut gradient[row.clone()], &mut hessian[row]);
+    }
+    Derivatives {
+        gradient: Grid::from_vec(w, h, gradient).expect("size matches"),
+        hessian: Grid::from_vec(w, h, hessian).expect("size matches"),
     }
 }
 
@@ -218,19 +265,23 @@ mod tests {
         // Centre of a 40×30 image is (19.5, 14.5).
         let img = image(40, 30, |x, y| a * (x - 19.5) + b * (y - 14.5) + c);
         let f = compute(&img, &Params::default());
+        let d = derivatives(&img, &Params::default());
         for (x, y, p) in f.plane.enumerate() {
             assert!((f64::from(p[0]) - a).abs() < 1e-4, "a at ({x}, {y}) = {}", p[0]);
             assert!((f64::from(p[1]) - b).abs() < 1e-4, "b at ({x}, {y}) = {}", p[1]);
             assert!((f64::from(p[2]) - c).abs() < 1e-4, "c at ({x}, {y}) = {}", p[2]);
         }
         for i in 0..img.len() {
-            let g = f.gradient.as_slice()[i];
+            let g = d.gradient.as_slice()[i];
             assert!((f64::from(g[0]) - a).abs() < 1e-4 && (f64::from(g[1]) - b).abs() < 1e-4);
             // The f32 input itself is only exact to ~1e-5 at z = 100, which bounds the second derivatives.
             assert!(f.k.as_slice()[i].abs() < 1e-8, "K = {}", f.k.as_slice()[i]);
             assert!(f.h.as_slice()[i].abs() < 2e-5, "H = {}", f.h.as_slice()[i]);
             assert!(f.curvedness.as_slice()[i].abs() < 2e-5);
             assert!(f.k_std.as_slice()[i].abs() < 1e-8);
+            for p in [f.principal().as_slice()[i], d.principal().as_slice()[i]] {
+                assert!(p[0].abs() < 2e-5 && p[1].abs() < 2e-5, "principal {p:?}");
+            }
         }
     }
 
@@ -251,16 +302,50 @@ mod tests {
 
     #[test]
     fn fit_planes_matches_compute_plane() {
-        let img = image(20, 17, |x, y| 0.01 * x * x + 0.5 * y);
-        let a = fit_planes(&img, 5);
-        let b = compute(&img, &Params::default()).plane;
-        assert!(
-            a.as_slice()
-                .iter()
-                .flatten()
-                .zip(b.as_slice().iter().flatten())
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        );
+        // The plane-only engine gives the full engine's planes bit for bit (fused 3/5/7 windows, multi-pass 9,
+        // holes and ±∞ sending windows to the general path).
+        let plane_bits =
+            |p: &PlaneMap| p.as_slice().iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let clean = image(20, 17, |x, y| 0.01 * x * x + 0.5 * y);
+        for (seed, window_px) in [(0u64, 5u32), (1, 3), (2, 5), (3, 7), (4, 9)] {
+            let holed = random_image(seed, 41, 33, 1.0, seed % 2 == 0);
+            for img in [&clean, &holed] {
+                let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 5 };
+                let a = fit_planes(img, window_px);
+                for path in [fit::Path::Fast, fit::Path::Unspecialised] {
+                    let b = compute_with(img, &p, path, SurfaceFeatures::default()).plane;
+                    assert_eq!(plane_bits(&a), plane_bits(&b), "seed {seed}, window {window_px}, {path:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn derivatives_are_the_ones_behind_the_curvatures() {
+        // K, H and curvedness of `compute` are those of `derivatives`, bit for bit, and `principal` from the
+        // derivatives is consistent with them.
+        for (seed, window_px) in [(5u64, 5u32), (6, 3), (7, 7), (8, 9)] {
+            let img = random_image(seed, 37, 30, 1.0, seed % 2 == 1);
+            let p = Params { window_px: 5, deriv_window_px: window_px, k_std_window_px: 3 };
+            let (f, d) = (compute(&img, &p), derivatives(&img, &p));
+            let n = img.len();
+            let (mut k, mut h, mut c) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            let (g, s) = (d.gradient.as_slice(), d.hessian.as_slice());
+            curvature::curvature_row(g, s, &mut k, &mut h, &mut c);
+            let b = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(b(&k), b(f.k.as_slice()), "seed {seed}: K");
+            assert_eq!(b(&h), b(f.h.as_slice()), "seed {seed}: H");
+            assert_eq!(b(&c), b(f.curvedness.as_slice()), "seed {seed}: curvedness");
+            for (i, pr) in d.principal().as_slice().iter().enumerate() {
+                assert_eq!(pr[0].is_nan(), h[i].is_nan());
+                if !h[i].is_nan() {
+                    assert!(pr[0] >= pr[1], "seed {seed}: k1 < k2");
+                    assert_relative_eq!(0.5 * (pr[0] + pr[1]), h[i], max_relative = 1e-6, epsilon = 1e-6);
+                    let cv = (0.5 * (pr[0] * pr[0] + pr[1] * pr[1])).sqrt();
+                    assert_relative_eq!(cv, c[i], max_relative = 1e-5, epsilon = 1e-6);
+                }
+            }
+        }
     }
 
     /// Exact K and H of the graph z = f(x, y) from its analytic derivatives.
@@ -277,15 +362,18 @@ mod tests {
         let (cx, cy, r, z0) = (32.0, 32.0, 60.0, 200.0);
         let img = image(64, 64, |x, y| z0 - (r * r - (x - cx).powi(2) - (y - cy).powi(2)).sqrt());
         let f = compute(&img, &Params::default());
+        let (principal, exact) = (f.principal(), derivatives(&img, &Params::default()).principal());
         for y in 8..56u32 {
             for x in 8..56u32 {
                 let k = f64::from(f.k[(x, y)]);
                 let h = f64::from(f.h[(x, y)]);
                 assert_relative_eq!(k, 1.0 / (r * r), max_relative = 0.05);
                 assert_relative_eq!(h, 1.0 / r, max_relative = 0.05);
-                let [k1, k2] = f.principal[(x, y)];
-                assert_relative_eq!(f64::from(k1), 1.0 / r, max_relative = 0.05);
-                assert_relative_eq!(f64::from(k2), 1.0 / r, max_relative = 0.05);
+                // Both forms of the principal curvatures: from H and K, and from the derivatives.
+                for [k1, k2] in [principal[(x, y)], exact[(x, y)]] {
+                    assert_relative_eq!(f64::from(k1), 1.0 / r, max_relative = 0.05);
+                    assert_relative_eq!(f64::from(k2), 1.0 / r, max_relative = 0.05);
+                }
                 assert_relative_eq!(f64::from(f.curvedness[(x, y)]), 1.0 / r, max_relative = 0.05);
             }
         }
@@ -339,17 +427,18 @@ mod tests {
         holed[(3, 25)] = NAN;
         let ff = compute(&full, &Params::default());
         let fh = compute(&holed, &Params::default());
+        let (df, dh) = (derivatives(&full, &Params::default()), derivatives(&holed, &Params::default()));
         for (x, y, p) in fh.plane.enumerate() {
             if holed[(x, y)].is_nan() {
                 assert!(p.iter().all(|v| v.is_nan()), "no-data pixel got a plane");
-                assert!(fh.k[(x, y)].is_nan() && fh.gradient[(x, y)][0].is_nan());
+                assert!(fh.k[(x, y)].is_nan() && dh.gradient[(x, y)][0].is_nan());
                 continue;
             }
             let q = ff.plane[(x, y)];
             for i in 0..3 {
                 assert!((p[i] - q[i]).abs() < 1e-4, "plane at ({x}, {y}): {p:?} vs {q:?}");
             }
-            let (g, gf) = (fh.gradient[(x, y)], ff.gradient[(x, y)]);
+            let (g, gf) = (dh.gradient[(x, y)], df.gradient[(x, y)]);
             assert!((g[0] - gf[0]).abs() < 1e-4 && (g[1] - gf[1]).abs() < 1e-4, "gradient at ({x}, {y})");
             assert!(fh.k[(x, y)].abs() < 1e-8 && fh.h[(x, y)].abs() < 2e-5, "curvature at ({x}, {y})");
         }
@@ -361,17 +450,22 @@ mod tests {
             }
         }
         assert_eq!(bits(&compute(&other, &Params::default())), bits(&fh));
+        assert_eq!(dbits(&derivatives(&other, &Params::default())), dbits(&dh));
     }
 
     /// Every float of the features as bits, so NaN compares equal to NaN.
     fn bits(f: &SurfaceFeatures) -> Vec<u32> {
         let mut v: Vec<u32> = f.plane.as_slice().iter().flatten().map(|x| x.to_bits()).collect();
-        v.extend(f.gradient.as_slice().iter().flatten().map(|x| x.to_bits()));
-        v.extend(f.hessian.as_slice().iter().flatten().map(|x| x.to_bits()));
-        v.extend(f.principal.as_slice().iter().flatten().map(|x| x.to_bits()));
         for g in [&f.k, &f.h, &f.curvedness, &f.k_std] {
             v.extend(g.as_slice().iter().map(|x| x.to_bits()));
         }
+        v
+    }
+
+    /// Every float of the derivatives as bits.
+    fn dbits(d: &Derivatives) -> Vec<u32> {
+        let mut v: Vec<u32> = d.gradient.as_slice().iter().flatten().map(|x| x.to_bits()).collect();
+        v.extend(d.hessian.as_slice().iter().flatten().map(|x| x.to_bits()));
         v
     }
 
@@ -400,7 +494,7 @@ mod tests {
         let mut img = image(16, 16, f_);
         img[(7, 7)] = NAN;
         img[(8, 9)] = NAN;
-        let f = compute(&img, &Params::default());
+        let f = derivatives(&img, &Params::default());
         for (x, y, g) in f.hessian.enumerate() {
             if img[(x, y)].is_nan() {
                 continue;
@@ -529,11 +623,19 @@ mod tests {
             let img = random_image(seed, w, h, scale, quantise);
             let (window_px, deriv_window_px, k_std_window_px) = windows[seed as usize % windows.len()];
             let p = Params { window_px, deriv_window_px, k_std_window_px };
-            let fast = compute_with(&img, &p, fit::Path::Fast, SurfaceFeatures::default());
-            let unspec = compute_with(&img, &p, fit::Path::Unspecialised, SurfaceFeatures::default());
-            let general = compute_with(&img, &p, fit::Path::General, SurfaceFeatures::default());
+            let run = |path| {
+                let f = compute_with(&img, &p, path, SurfaceFeatures::default());
+                (f, derivatives_with(&img, p.deriv_window_px, path))
+            };
+            let (fast, unspec, general) =
+                (run(fit::Path::Fast), run(fit::Path::Unspecialised), run(fit::Path::General));
             // The specialised loops do the same arithmetic in the same order as the multi-pass loops.
-            assert_eq!(bits(&fast), bits(&unspec), "seed {seed}: specialised vs multi-pass");
+            assert_eq!(bits(&fast.0), bits(&unspec.0), "seed {seed}: specialised vs multi-pass");
+            assert_eq!(
+                dbits(&fast.1),
+                dbits(&unspec.1),
+                "seed {seed}: specialised vs multi-pass derivatives"
+            );
             compare(&img, &fast, &general, seed);
         }
     }
@@ -544,21 +646,26 @@ mod tests {
         for (w, h) in [(0, 0), (0, 3), (1, 1), (2, 7), (7, 2), (5, 5), (6, 9), (9, 5)] {
             let img = random_image(u64::from(w * 31 + h), w, h, 1.0, true);
             for p in [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9 }] {
-                let fast = compute(&img, &p);
-                assert_eq!(fast.k.dimensions(), (w, h));
-                compare(
-                    &img,
-                    &fast,
-                    &compute_with(&img, &p, fit::Path::General, SurfaceFeatures::default()),
-                    u64::from(w * 100 + h),
+                let fast = (compute(&img, &p), derivatives(&img, &p));
+                assert_eq!(fast.0.k.dimensions(), (w, h));
+                assert_eq!(fast.1.hessian.dimensions(), (w, h));
+                let general = (
+                    compute_with(&img, &p, fit::Path::General, SurfaceFeatures::default()),
+                    derivatives_with(&img, p.deriv_window_px, fit::Path::General),
                 );
+                compare(&img, &fast, &general, u64::from(w * 100 + h));
             }
         }
     }
 
     /// Checks the fast-path features `f` against the general-path features `g`: same no-data pattern everywhere,
     /// and values within the f32 rounding bound of the fast path (see the comments).
-    fn compare(img: &RangeImage, f: &SurfaceFeatures, g: &SurfaceFeatures, seed: u64) {
+    fn compare(
+        img: &RangeImage,
+        (f, fdv): &(SurfaceFeatures, Derivatives),
+        (g, gdv): &(SurfaceFeatures, Derivatives),
+        seed: u64,
+    ) {
         let finite: Vec<f64> =
             img.as_slice().iter().filter(|v| v.is_finite()).map(|&v| f64::from(v)).collect();
         let range =
@@ -577,8 +684,8 @@ mod tests {
                 q.map(f32::is_nan),
                 "seed {seed}: plane NaN pattern at ({x}, {y})"
             );
-            let (gd, fd) = (g.gradient[(x, y)], f.gradient[(x, y)]);
-            let (gh, fh) = (g.hessian[(x, y)], f.hessian[(x, y)]);
+            let (gd, fd) = (gdv.gradient[(x, y)], fdv.gradient[(x, y)]);
+            let (gh, fh) = (gdv.hessian[(x, y)], fdv.hessian[(x, y)]);
             assert_eq!(gd.map(f32::is_nan), fd.map(f32::is_nan), "seed {seed}: gradient NaN pattern");
             assert_eq!(gh.map(f32::is_nan), fh.map(f32::is_nan), "seed {seed}: hessian NaN pattern");
             if p[0].is_nan() {
@@ -624,7 +731,7 @@ mod tests {
                 }
             }
         }
-        for (a, b) in g.principal.as_slice().iter().zip(f.principal.as_slice()) {
+        for (a, b) in gdv.principal().as_slice().iter().zip(fdv.principal().as_slice()) {
             for i in 0..2 {
                 assert_eq!(a[i].is_nan(), b[i].is_nan());
                 if !a[i].is_nan() {

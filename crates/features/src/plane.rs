@@ -2,11 +2,11 @@
 //!
 //! Each pixel's fit uses the valid pixels of the `w × w` window centred on it (the window is clipped at the image
 //! border). x and y are measured from the image centre, so `c` is the same for every pixel of a true plane. The fits
-//! come from the row engine ([`crate::fit`]): full windows by separable filters (O(w) per pixel with tiny constants),
+//! come from the row engine ([`crate::fit`], its plane-only mode): full windows by separable filters (O(w) per pixel with tiny constants),
 //! the others from the nine sums `Σ1, Σu, Σv, Σu², Σuv, Σv², Σz, Σuz, Σvz` of their valid pixels ([`solve`]). The
 //! coordinate sums are exact (integers), so collinearity is detected exactly.
 
-use crate::fit::{Path, RowFitter};
+use crate::fit::{Fit, Path, RowFitter};
 use rangeimage::{PlaneMap, RangeImage};
 
 /// Fits the local plane of every pixel; `[NAN; 3]` at no-data pixels and where the valid pixels of the window are
@@ -14,8 +14,9 @@ use rangeimage::{PlaneMap, RangeImage};
 pub(crate) fn fit(range: &RangeImage, window_px: u32) -> PlaneMap {
     let (w, h) = range.dimensions();
     let (wu, hu) = (w as usize, h as usize);
-    let mut fitter = RowFitter::new(range.as_slice(), wu, hu, window_px, Path::Fast);
+    let mut fitter = RowFitter::new(range.as_slice(), wu, hu, window_px, Path::Fast, Fit::Plane);
     let mut plane = Vec::with_capacity(wu * hu);
+    // The plane-only engine does not write these.
     let (mut grad, mut hess) = (vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
     for y in 0..hu {
         plane.resize((y + 1) * wu, [f32::NAN; 3]);

@@ -80,7 +80,7 @@ pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
         }
         if n == 0.0 { f32::NAN } else { ((ss / n - (s / n).powi(2)).max(0.0)).sqrt() as f32 }
     });
-    SurfaceFeatures { plane, gradient, hessian, k, h: hm, principal, curvedness, k_std }
+    SurfaceFeatures { plane, k, h: hm, curvedness, k_std }
 }
 
 /// Which face of [`box_scene`] a pixel belongs to: 1 = face A, 2 = face B (crease with A at
