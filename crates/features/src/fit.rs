@@ -479,7 +479,6 @@ impl<'a> RowFitter<'a> {
             return NAN_FIT;
         }
         let zc = f64::from(zc);
-        let win = 2 * r + 1;
         let (xi, yi) = (x as i64, y as i64);
         // The window clipped to the image.
         let (ulo, uhi) = ((-xi).max(-r), (wu as i64 - 1 - xi).min(r));
@@ -489,55 +488,11 @@ impl<'a> RowFitter<'a> {
         {
             return f;
         }
-        let tap = |du: i64, dv: i64| ((dv + r) * win + du + r) as usize;
-        let at = |du: i64, dv: i64| self.src[(yi + dv) as usize * wu + (xi + du) as usize];
-        let mut rhs = [0.0f64; 6];
-        let mut count = 0;
-        for dv in vlo..=vhi {
-            for du in ulo..=uhi {
-                let z = at(du, dv);
-                if z.is_finite() {
-                    count += 1;
-                    let b = &self.bas[tap(du, dv)];
-                    let z = f64::from(z) - zc;
-                    for i in 0..6 {
-                        rhs[i] += b[i] * z;
-                    }
-                }
-            }
-        }
-        // Normal matrix of the valid pixels: their outer products, or the full window's minus the missing ones',
-        // whichever has fewer terms. The entries are integers, so both are exact and equal.
-        let mut packed = [0.0f64; 21];
-        if 2 * count <= (win * win) as usize {
-            for dv in vlo..=vhi {
-                for du in ulo..=uhi {
-                    if at(du, dv).is_finite() {
-                        let o = &self.outer[tap(du, dv)];
-                        for i in 0..21 {
-                            packed[i] += o[i];
-                        }
-                    }
-                }
-            }
-        } else {
-            let mut miss = [0.0f64; 21];
-            for dv in -r..=r {
-                for du in -r..=r {
-                    let inside = (ulo..=uhi).contains(&du) && (vlo..=vhi).contains(&dv);
-                    if !inside || !at(du, dv).is_finite() {
-                        let o = &self.outer[tap(du, dv)];
-                        for i in 0..21 {
-                            miss[i] += o[i];
-                        }
-                    }
-                }
-            }
-            let full = &self.outer_full;
-            for i in 0..21 {
-                packed[i] = full[i] - miss[i];
-            }
-        }
+        // The plane needs only the first 3 right-hand sides and the first 6 packed entries (the 3×3 block).
+        let (count, mut rhs, packed) = match self.fit {
+            Fit::Quadratic => self.normal_sums::<6, 21>(x, y, zc, [ulo, uhi, vlo, vhi]),
+            Fit::Plane => self.normal_sums::<3, 6>(x, y, zc, [ulo, uhi, vlo, vhi]),
+        };
         let mut n = [[0.0f64; 6]; 6];
         let mut t = 0;
         for i in 0..6 {
@@ -551,6 +506,71 @@ impl<'a> RowFitter<'a> {
         let quad =
             (self.fit == Fit::Quadratic && count >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs);
         self.pixel_fit(x, y, zc, plane, quad)
+    }
+
+    /// The sums of the general fit over the valid pixels of the clipped window `[ulo, uhi] × [vlo, vhi]` around
+    /// `(x, y)`: their count, the first `NR` right-hand sides `Σ b·(z − zc)` and the first `NP` packed entries of the
+    /// normal matrix (the rest stay 0).
+    fn normal_sums<const NR: usize, const NP: usize>(
+        &self,
+        x: usize,
+        y: usize,
+        zc: f64,
+        [ulo, uhi, vlo, vhi]: [i64; 4],
+    ) -> (usize, [f64; 6], [f64; 21]) {
+        let (wu, r) = (self.wu, self.r as i64);
+        let win = 2 * r + 1;
+        let (xi, yi) = (x as i64, y as i64);
+        let tap = |du: i64, dv: i64| ((dv + r) * win + du + r) as usize;
+        let at = |du: i64, dv: i64| self.src[(yi + dv) as usize * wu + (xi + du) as usize];
+        let mut rhs = [0.0f64; 6];
+        let mut count = 0;
+        for dv in vlo..=vhi {
+            for du in ulo..=uhi {
+                let z = at(du, dv);
+                if z.is_finite() {
+                    count += 1;
+                    let b = &self.bas[tap(du, dv)];
+                    let z = f64::from(z) - zc;
+                    for i in 0..NR {
+                        rhs[i] += b[i] * z;
+                    }
+                }
+            }
+        }
+        // Normal matrix of the valid pixels: their outer products, or the full window's minus the missing ones',
+        // whichever has fewer terms. The entries are integers, so both are exact and equal.
+        let mut packed = [0.0f64; 21];
+        if 2 * count <= (win * win) as usize {
+            for dv in vlo..=vhi {
+                for du in ulo..=uhi {
+                    if at(du, dv).is_finite() {
+                        let o = &self.outer[tap(du, dv)];
+                        for i in 0..NP {
+                            packed[i] += o[i];
+                        }
+                    }
+                }
+            }
+        } else {
+            let mut miss = [0.0f64; 21];
+            for dv in -r..=r {
+                for du in -r..=r {
+                    let inside = (ulo..=uhi).contains(&du) && (vlo..=vhi).contains(&dv);
+                    if !inside || !at(du, dv).is_finite() {
+                        let o = &self.outer[tap(du, dv)];
+                        for i in 0..NP {
+                            miss[i] += o[i];
+                        }
+                    }
+                }
+            }
+            let full = &self.outer_full;
+            for i in 0..NP {
+                packed[i] = full[i] - miss[i];
+            }
+        }
+        (count, rhs, packed)
     }
 
     /// The outputs of a fit in window coordinates with depths relative to `zc`.
