@@ -46,3 +46,11 @@ fn fit_planes(b: divan::Bencher, side: u32) {
     let img = scene(side);
     b.bench(|| features::fit_planes(divan::black_box(&img), 5));
 }
+
+/// The quadratic fit's derivatives alone (`features::derivatives`, not part of `compute`'s output).
+#[divan::bench(args = [512])]
+fn derivatives(b: divan::Bencher, side: u32) {
+    let img = scene(side);
+    let p = features::Params::default();
+    b.bench(|| features::derivatives(divan::black_box(&img), &p));
+}
