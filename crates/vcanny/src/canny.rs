@@ -131,7 +131,6 @@ impl Histogram {
             return vec![f32::INFINITY; qs.len()];
         }
         let mut low = vec![0u32; 1 << 16];
-        const CHUNK: usize = 1024;
         qs.iter()
             .map(|&q| {
                 let mut k = quantile_rank(self.n, q);
@@ -140,22 +139,15 @@ impl Histogram {
                     k -= self.count(bucket);
                     bucket += 1;
                 }
-                // The rank among the low 16 bits of the keys in that bucket, by a second histogram (branch-free:
-                // every pixel adds 0 or 1).
-                // The bucket's keys are first compacted branch-free (every key written, the cursor advanced past
-                // the ones in the bucket), so the other pixels cost no scattered increment.
+                // The rank among the low 16 bits of the keys in that bucket, by a second histogram of those keys
+                // alone. The bucket holds a small share of the pixels, so the branch is well predicted (measured
+                // faster than a branch-free compaction, whose cursor chains every pixel to the previous one).
                 let bucket = bucket as u32;
                 low.fill(0);
-                let mut buf = [0u16; CHUNK];
-                for (ms, os) in mag.chunks(CHUNK).zip(ok.chunks(CHUNK)) {
-                    let mut j = 0;
-                    for (&m, &o) in ms.iter().zip(os) {
-                        let key = order_key(m);
-                        buf[j] = key as u16;
-                        j += usize::from(o & (key >> 16 == bucket));
-                    }
-                    for &s in &buf[..j] {
-                        low[s as usize] += 1;
+                for (&m, &o) in mag.iter().zip(ok) {
+                    let key = order_key(m);
+                    if o && key >> 16 == bucket {
+                        low[(key & 0xffff) as usize] += 1;
                     }
                 }
                 let mut lo = 0;
