@@ -74,8 +74,8 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     bar.finish_and_clear();
 
     let report = Report {
-        data_dir: shown(root, &data),
-        config_path: shown(root, &o.config),
+        data_dir: crate::shown(root, &data),
+        config_path: crate::shown(root, &o.config),
         config_toml: config.to_toml(),
         rows,
         wall_s: started.elapsed().as_secs_f64(),
@@ -85,11 +85,6 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     eprintln!("{}", report::summary(&report));
     eprintln!("wrote {}", o.out.join("report.html").display());
     Ok(())
-}
-
-/// `path` relative to the workspace `root` when it lies inside it (the report names no machine's directories).
-fn shown(root: &Path, path: &Path) -> String {
-    path.strip_prefix(root).unwrap_or(path).display().to_string()
 }
 
 /// Runs the pipeline on one test image, writes its outputs and figure, and scores it.

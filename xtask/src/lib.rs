@@ -26,6 +26,11 @@ commands:
   tidy
       Check the source tree: `//!` doc lines, workspace lints, stage crate dependencies";
 
+/// `path` relative to the workspace `root` when it lies inside it, for reports (they name no machine's directories).
+pub fn shown(root: &Path, path: &Path) -> String {
+    path.strip_prefix(root).unwrap_or(path).display().to_string()
+}
+
 /// The workspace root (the parent of xtask/).
 pub fn project_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask lives in the workspace root").to_path_buf()

@@ -234,7 +234,7 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let (bm, bs) = &means[best];
     let mut report = format!(
         "# rangeseg tuning\n\nGrid `{}` ({} combinations) over the {} training images; objective `{objective_name}`: {}.\n\n",
-        grid_path.display(),
+        crate::shown(root, &grid_path),
         combos.len(),
         images.len(),
         OBJECTIVES.iter().find(|(n, _)| *n == objective_name).map(|(_, d)| *d).unwrap_or("")
