@@ -20,7 +20,8 @@
 //! **General path** (windows clipped by the border or holding no-data): the plane and the quadratic are fitted to the
 //! window's valid pixels alone (window coordinates, depths relative to the centre pixel, f64). If the window clipped
 //! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
-//! computed once (for `w ≤ 7`) and applied. Otherwise the pixel's own normal equations are solved (the quadratic by
+//! computed once (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away from the sides share
+//! one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are solved (the quadratic by
 //! `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (or the valid pixels'
 //! terms, whichever are fewer), exact because its entries are integers.
 
@@ -85,6 +86,10 @@ pub(crate) struct RowFitter<'a> {
     fit: Fit,
     /// Kernels of the clipped-window rectangles met so far, indexed by the rectangle (empty until first needed).
     shapes: Vec<Option<ShapeKernel>>,
+    /// Scratch of [`Self::shape_row`]: the nine sums per pixel (plane `a, b, c`, quadratic `c0..c5`), and per column
+    /// whether the rectangle's rows hold no-data there.
+    row_acc: Vec<f64>,
+    row_bad: Vec<bool>,
 }
 
 /// Which code fits the full windows.
@@ -184,6 +189,8 @@ impl<'a> RowFitter<'a> {
             path,
             fit,
             shapes: Vec::new(),
+            row_acc: Vec::new(),
+            row_bad: Vec::new(),
         }
     }
 
@@ -307,13 +314,20 @@ impl<'a> RowFitter<'a> {
                 }
             }
         }
+        // The top and bottom border rows: every pixel away from the side borders has the same clipped rectangle,
+        // so its kernels are applied to the whole row at once.
+        let shape_row = !fast_row && self.path != Path::General && wu > 2 * r && r as i64 <= MAX_SHAPE_R;
+        if shape_row {
+            (fast_lo, fast_hi) = (r, wu - r);
+            self.shape_row(y, plane, grad, hess);
+        }
         for x in (0..fast_lo).chain(fast_hi..wu) {
             let f = self.general_fit(x, y);
             self.put(x, f, plane, grad, hess);
         }
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
-        if fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
+        if fast_row && fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
             for x in fast_lo..fast_hi {
                 if !self.chk[x - r].is_finite() {
                     let f = self.general_fit(x, y);
@@ -379,6 +393,7 @@ impl<'a> RowFitter<'a> {
     /// as `row_pass` + `moments` + `fast_row`, but fused into three loops whose inner loops over the window are
     /// unrolled (bit-identical results, far fewer memory passes). `Q`: fit the quadratic too ([`Fit::Quadratic`]);
     /// without it the quadratic's moments are not computed.
+    #[inline(never)] // inlined into `row`, its loops stop vectorising
     fn fused<const R: usize, const W: usize, const Q: bool>(
         &mut self,
         y: usize,
@@ -598,23 +613,22 @@ impl<'a> RowFitter<'a> {
     /// offsets, holds no no-data: the least-squares kernels of that rectangle (computed once per rectangle) applied
     /// to the depths. `None` if the rectangle holds no-data.
     fn shape_fit(&mut self, x: usize, y: usize, zc: f64, [ulo, uhi, vlo, vhi]: [i64; 4]) -> Option<PixelFit> {
-        let (r, wu) = (self.r as i64, self.wu);
-        let s = (r + 1) as usize;
-        let key = (((ulo + r) as usize * s + uhi as usize) * s + (vlo + r) as usize) * s + vhi as usize;
-        if self.shapes.is_empty() {
-            self.shapes = vec![None; s * s * s * s];
+        let wu = self.wu;
+        let cols = (x as i64 + ulo) as usize..=(x as i64 + uhi) as usize;
+        for dv in vlo..=vhi {
+            let row = &self.src[(y as i64 + dv) as usize * wu..];
+            if row[cols.clone()].iter().any(|z| !z.is_finite()) {
+                return None;
+            }
         }
-        let kernel = self.shapes[key].get_or_insert_with(|| ShapeKernel::new([ulo, uhi, vlo, vhi]));
+        let key = self.shape_kernel([ulo, uhi, vlo, vhi]);
+        let kernel = self.shapes[key].as_ref().expect("just made");
         let (mut p, mut q) = ([0.0f64; 3], [0.0f64; 6]);
         let quad = self.fit == Fit::Quadratic;
         let mut t = 0;
         for dv in vlo..=vhi {
             let row = &self.src[(y as i64 + dv) as usize * wu..];
-            for du in ulo..=uhi {
-                let z = row[(x as i64 + du) as usize];
-                if !z.is_finite() {
-                    return None;
-                }
+            for &z in &row[cols.clone()] {
                 let z = f64::from(z) - zc;
                 let kp = &kernel.plane[t];
                 for i in 0..3 {
@@ -631,6 +645,107 @@ impl<'a> RowFitter<'a> {
         }
         let (has_plane, has_quad) = (kernel.has_plane, quad && kernel.has_quad);
         Some(self.pixel_fit(x, y, zc, has_plane.then_some(p), has_quad.then_some(q)))
+    }
+
+    /// The index in `shapes` of the kernels of the rectangle `[ulo, uhi] × [vlo, vhi]`, computed if new.
+    fn shape_kernel(&mut self, [ulo, uhi, vlo, vhi]: [i64; 4]) -> usize {
+        let r = self.r as i64;
+        let s = (r + 1) as usize;
+        let key = (((ulo + r) as usize * s + uhi as usize) * s + (vlo + r) as usize) * s + vhi as usize;
+        if self.shapes.is_empty() {
+            self.shapes = vec![None; s * s * s * s];
+        }
+        self.shapes[key].get_or_insert_with(|| ShapeKernel::new([ulo, uhi, vlo, vhi]));
+        key
+    }
+
+    /// [`Self::shape_fit`] of the pixels `r..wu − r` of a top or bottom border row `y` (`wu > 2r`, `r ≤ 3`), whose
+    /// clipped windows are all the same rectangle: each tap's kernel weights applied across the row (the same
+    /// arithmetic in the same order per pixel, so bit-identical); pixels whose rectangle holds no-data go to
+    /// [`Self::general_fit`].
+    #[inline(never)]
+    fn shape_row(&mut self, y: usize, plane: &mut [[f32; 3]], grad: &mut [[f32; 2]], hess: &mut [[f32; 3]]) {
+        let (wu, hu, r) = (self.wu, self.hu, self.r);
+        let (ri, yi) = (r as i64, y as i64);
+        let (vlo, vhi) = ((-yi).max(-ri), (hu as i64 - 1 - yi).min(ri));
+        let key = self.shape_kernel([-ri, ri, vlo, vhi]);
+        let m = wu - 2 * r;
+        let quad = self.fit == Fit::Quadratic;
+        let mut acc = std::mem::take(&mut self.row_acc);
+        let mut bad = std::mem::take(&mut self.row_bad);
+        acc.clear();
+        acc.resize(9 * m, 0.0);
+        bad.clear();
+        bad.resize(wu, false);
+        let src = self.src;
+        let rows = || (vlo..=vhi).map(|dv| &src[(yi + dv) as usize * wu..(yi + dv + 1) as usize * wu]);
+        for row in rows() {
+            for (b, z) in bad.iter_mut().zip(row) {
+                *b |= !z.is_finite();
+            }
+        }
+        let kernel = self.shapes[key].as_ref().expect("just made");
+        let zc = &src[y * wu + r..y * wu + r + m];
+        let (pa, qa) = acc.split_at_mut(3 * m);
+        let [p0, p1, p2] = pa.get_disjoint_mut([0..m, m..2 * m, 2 * m..3 * m]).expect("disjoint");
+        let mut t = 0;
+        for row in rows() {
+            for du in 0..2 * r + 1 {
+                let zs = &row[du..du + m];
+                let kp = kernel.plane[t];
+                for i in 0..m {
+                    let z = f64::from(zs[i]) - f64::from(zc[i]);
+                    p0[i] += kp[0] * z;
+                    p1[i] += kp[1] * z;
+                    p2[i] += kp[2] * z;
+                }
+                if quad {
+                    let kq = kernel.quad[t];
+                    for (j, q) in qa.chunks_exact_mut(m).enumerate() {
+                        let q = &mut q[..m];
+                        for i in 0..m {
+                            let z = f64::from(zs[i]) - f64::from(zc[i]);
+                            q[i] += kq[j] * z;
+                        }
+                    }
+                }
+                t += 1;
+            }
+        }
+        let (has_plane, has_quad) = (kernel.has_plane, quad && kernel.has_quad);
+        let y0 = y as f64 - self.cy;
+        let mut refit = false;
+        for i in 0..m {
+            let x = r + i;
+            if bad[x - r..=x + r].iter().any(|&b| b) {
+                refit = true;
+                continue;
+            }
+            plane[x] = if has_plane {
+                let (a, b, c) = (acc[i], acc[m + i], acc[2 * m + i]);
+                let zc = f64::from(zc[i]);
+                [a as f32, b as f32, (zc + c - a * self.xoff[x] - b * y0) as f32]
+            } else {
+                [f32::NAN; 3]
+            };
+            if quad {
+                (grad[x], hess[x]) = if has_quad {
+                    let q = |j: usize| acc[(3 + j) * m + i];
+                    ([q(1) as f32, q(2) as f32], [(2.0 * q(3)) as f32, q(4) as f32, (2.0 * q(5)) as f32])
+                } else {
+                    ([f32::NAN; 2], [f32::NAN; 3])
+                };
+            }
+        }
+        if refit {
+            for x in r..wu - r {
+                if bad[x - r..=x + r].iter().any(|&b| b) {
+                    let f = self.general_fit(x, y);
+                    self.put(x, f, plane, grad, hess);
+                }
+            }
+        }
+        (self.row_acc, self.row_bad) = (acc, bad);
     }
 }
 

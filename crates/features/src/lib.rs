@@ -641,6 +641,39 @@ mod tests {
     }
 
     #[test]
+    fn border_rows_and_columns_equal_the_general_path_bit_for_bit() {
+        // The fast path fits the top and bottom border rows a whole row at a time (and the side columns pixel by
+        // pixel): the same arithmetic as the general path's per-pixel fits, so the same bits, holes included.
+        for (seed, window_px) in [(20u64, 3u32), (21, 5), (22, 7), (23, 5), (24, 9)] {
+            let img = random_image(seed, 30 + seed as u32, 19, 1.0, seed % 2 == 0);
+            let (w, h) = img.dimensions();
+            let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 3 };
+            let r = window_px / 2;
+            let [fast, general] = [fit::Path::Fast, fit::Path::General].map(|path| {
+                (
+                    compute_with(&img, &p, path, SurfaceFeatures::default()),
+                    derivatives_with(&img, window_px, path),
+                )
+            });
+            let plane_mode = [
+                fit_planes(&img, window_px),
+                compute_with(&img, &p, fit::Path::General, SurfaceFeatures::default()).plane,
+            ];
+            for (x, y, q) in general.0.plane.enumerate() {
+                if y >= r && y + r < h && x >= r && x + r < w {
+                    continue;
+                }
+                let at = format!("seed {seed}, window {window_px}, ({x}, {y})");
+                let b = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(b(&fast.0.plane[(x, y)]), b(q), "plane at {at}");
+                assert_eq!(b(&plane_mode[0][(x, y)]), b(&plane_mode[1][(x, y)]), "fit_planes at {at}");
+                assert_eq!(b(&fast.1.gradient[(x, y)]), b(&general.1.gradient[(x, y)]), "gradient at {at}");
+                assert_eq!(b(&fast.1.hessian[(x, y)]), b(&general.1.hessian[(x, y)]), "hessian at {at}");
+            }
+        }
+    }
+
+    #[test]
     fn tiny_and_empty_images_match_the_general_path() {
         // Images narrower or lower than the windows (no fast pixel at all, or a single fast row/column).
         for (w, h) in [(0, 0), (0, 3), (1, 1), (2, 7), (7, 2), (5, 5), (6, 9), (9, 5)] {
