@@ -22,8 +22,8 @@
 //! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
 //! computed once (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away from the sides share
 //! one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are solved (the quadratic by
-//! `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (or the valid pixels'
-//! terms, whichever are fewer), exact because its entries are integers.
+//! `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (of a window clipped by
+//! the border, the valid pixels' terms), exact because its entries are integers.
 
 use crate::plane;
 use crate::quadratic::{SgKernels, basis, cholesky_solve};
@@ -533,56 +533,45 @@ impl<'a> RowFitter<'a> {
         zc: f64,
         [ulo, uhi, vlo, vhi]: [i64; 4],
     ) -> (usize, [f64; 6], [f64; 21]) {
-        let (wu, r) = (self.wu, self.r as i64);
+        let (wu, r) = (self.wu, self.r);
         let win = 2 * r + 1;
-        let (xi, yi) = (x as i64, y as i64);
-        let tap = |du: i64, dv: i64| ((dv + r) * win + du + r) as usize;
-        let at = |du: i64, dv: i64| self.src[(yi + dv) as usize * wu + (xi + du) as usize];
+        // Window offsets as indices `0..win` of the window and columns/rows of the image.
+        let (u0, u1) = ((ulo + r as i64) as usize, (uhi + r as i64) as usize + 1);
+        let (v0, v1) = ((vlo + r as i64) as usize, (vhi + r as i64) as usize + 1);
+        let (x0, y0) = (x + u0 - r, y + v0 - r);
+        // The normal matrix is exact (integer entries): of a full window, the full window's minus the missing
+        // pixels' terms; of a clipped one, the sum of the valid pixels' terms.
+        let clipped = u1 - u0 < win || v1 - v0 < win;
         let mut rhs = [0.0f64; 6];
+        let mut acc = [0.0f64; 21];
         let mut count = 0;
-        for dv in vlo..=vhi {
-            for du in ulo..=uhi {
-                let z = at(du, dv);
+        for v in v0..v1 {
+            let row = &self.src[(y0 + v - v0) * wu + x0..][..u1 - u0];
+            let taps = v * win + u0..v * win + u1;
+            for ((&z, b), o) in row.iter().zip(&self.bas[taps.clone()]).zip(&self.outer[taps]) {
                 if z.is_finite() {
                     count += 1;
-                    let b = &self.bas[tap(du, dv)];
                     let z = f64::from(z) - zc;
                     for i in 0..NR {
                         rhs[i] += b[i] * z;
                     }
+                    if clipped {
+                        for i in 0..NP {
+                            acc[i] += o[i];
+                        }
+                    }
+                } else if !clipped {
+                    for i in 0..NP {
+                        acc[i] += o[i];
+                    }
                 }
             }
         }
-        // Normal matrix of the valid pixels: their outer products, or the full window's minus the missing ones',
-        // whichever has fewer terms. The entries are integers, so both are exact and equal.
-        let mut packed = [0.0f64; 21];
-        if 2 * count <= (win * win) as usize {
-            for dv in vlo..=vhi {
-                for du in ulo..=uhi {
-                    if at(du, dv).is_finite() {
-                        let o = &self.outer[tap(du, dv)];
-                        for i in 0..NP {
-                            packed[i] += o[i];
-                        }
-                    }
-                }
-            }
-        } else {
-            let mut miss = [0.0f64; 21];
-            for dv in -r..=r {
-                for du in -r..=r {
-                    let inside = (ulo..=uhi).contains(&du) && (vlo..=vhi).contains(&dv);
-                    if !inside || !at(du, dv).is_finite() {
-                        let o = &self.outer[tap(du, dv)];
-                        for i in 0..NP {
-                            miss[i] += o[i];
-                        }
-                    }
-                }
-            }
+        let mut packed = acc;
+        if !clipped {
             let full = &self.outer_full;
             for i in 0..NP {
-                packed[i] = full[i] - miss[i];
+                packed[i] = full[i] - acc[i];
             }
         }
         (count, rhs, packed)
@@ -623,26 +612,31 @@ impl<'a> RowFitter<'a> {
         }
         let key = self.shape_kernel([ulo, uhi, vlo, vhi]);
         let kernel = self.shapes[key].as_ref().expect("just made");
-        let (mut p, mut q) = ([0.0f64; 3], [0.0f64; 6]);
         let quad = self.fit == Fit::Quadratic;
-        let mut t = 0;
-        for dv in vlo..=vhi {
-            let row = &self.src[(y as i64 + dv) as usize * wu..];
-            for &z in &row[cols.clone()] {
-                let z = f64::from(z) - zc;
-                let kp = &kernel.plane[t];
-                for i in 0..3 {
-                    p[i] += kp[i] * z;
-                }
-                if quad {
-                    let kq = &kernel.quad[t];
-                    for i in 0..6 {
-                        q[i] += kq[i] * z;
+        // Each lane of `acc` sums its own weights times the depths in tap order (the plane's lanes 0..3, the
+        // quadratic's 3..9); the plane-only mode needs the first 4 lanes (3 used).
+        let mut acc = [0.0f64; 12];
+        let width = (uhi - ulo + 1) as usize;
+        for (dv, ks) in (vlo..=vhi).zip(kernel.taps.chunks_exact(width)) {
+            let row = &self.src[(y as i64 + dv) as usize * wu..][cols.clone()];
+            if quad {
+                for (&z, k) in row.iter().zip(ks) {
+                    let z = f64::from(z) - zc;
+                    for i in 0..12 {
+                        acc[i] += k[i] * z;
                     }
                 }
-                t += 1;
+            } else {
+                for (&z, k) in row.iter().zip(ks) {
+                    let z = f64::from(z) - zc;
+                    for i in 0..4 {
+                        acc[i] += k[i] * z;
+                    }
+                }
             }
         }
+        let p = [acc[0], acc[1], acc[2]];
+        let q = [acc[3], acc[4], acc[5], acc[6], acc[7], acc[8]];
         let (has_plane, has_quad) = (kernel.has_plane, quad && kernel.has_quad);
         Some(self.pixel_fit(x, y, zc, has_plane.then_some(p), has_quad.then_some(q)))
     }
@@ -692,7 +686,7 @@ impl<'a> RowFitter<'a> {
         for row in rows() {
             for du in 0..2 * r + 1 {
                 let zs = &row[du..du + m];
-                let kp = kernel.plane[t];
+                let kp = &kernel.taps[t];
                 for i in 0..m {
                     let z = f64::from(zs[i]) - f64::from(zc[i]);
                     p0[i] += kp[0] * z;
@@ -700,7 +694,7 @@ impl<'a> RowFitter<'a> {
                     p2[i] += kp[2] * z;
                 }
                 if quad {
-                    let kq = kernel.quad[t];
+                    let kq = &kp[3..9];
                     for (j, q) in qa.chunks_exact_mut(m).enumerate() {
                         let q = &mut q[..m];
                         for i in 0..m {
@@ -755,10 +749,9 @@ const MAX_SHAPE_R: i64 = 3;
 /// The least-squares kernels of one rectangle of window offsets (taps in row-major order).
 #[derive(Debug, Clone)]
 struct ShapeKernel {
-    /// Per tap, the weights of the plane's `[a, b, c]` (window coordinates, depths relative to the centre).
-    plane: Vec<[f64; 3]>,
-    /// Per tap, the weights of the quadratic's `c0..c5`.
-    quad: Vec<[f64; 6]>,
+    /// Per tap, the weights of the plane's `[a, b, c]` (window coordinates, depths relative to the centre), then
+    /// of the quadratic's `c0..c5`, then zeros (padding to whole vector registers).
+    taps: Vec<[f64; 12]>,
     /// Whether the rectangle determines a plane / a quadratic (same criteria as the general path).
     has_plane: bool,
     has_quad: bool,
@@ -790,8 +783,17 @@ impl ShapeKernel {
         let has_plane = plane.iter().all(Option::is_some);
         let has_quad = quad.iter().all(Option::is_some);
         Self {
-            plane: plane.into_iter().map(|p| p.unwrap_or([0.0; 3])).collect(),
-            quad: quad.into_iter().map(|q| q.unwrap_or([0.0; 6])).collect(),
+            taps: plane
+                .into_iter()
+                .zip(quad)
+                .map(|(p, q)| {
+                    let (p, q) = (p.unwrap_or([0.0; 3]), q.unwrap_or([0.0; 6]));
+                    let mut t = [0.0; 12];
+                    t[..3].copy_from_slice(&p);
+                    t[3..9].copy_from_slice(&q);
+                    t
+                })
+                .collect(),
             has_plane,
             has_quad,
         }
