@@ -154,16 +154,44 @@ impl WindowStd {
         }
         let add = (self.next_add <= (y + r).min(self.hu - 1)).then_some(self.next_add);
         self.next_add += usize::from(add.is_some());
-        self.update(add, (y > r).then(|| y - r - 1));
-        let [n, s1, s2] = &self.acc;
+        let sub = (y > r).then(|| y - r - 1);
         let (k_row, out) = (&k_row[..wu], &mut out[..wu]);
-        // var = (n·Σk² − (Σk)²) / n²: the numerator in f64, the division and the square root in f32.
+        if let (Some(a), Some(s)) = (add, sub) {
+            // The usual row: the running-sum update (as in `update`) and the output in one loop.
+            let slots = 2 * r + 2;
+            fn ring_row(ring: &[f64], yy: usize, slots: usize, wu: usize) -> &[f64] {
+                let o = (yy % slots) * wu;
+                &ring[o..o + wu]
+            }
+            let row = |ring, yy| ring_row(ring, yy, slots, wu);
+            let [rc, r1, r2] = &self.ring;
+            let (ac, sc, a1, s1r, a2, s2r) =
+                (row(rc, a), row(rc, s), row(r1, a), row(r1, s), row(r2, a), row(r2, s));
+            let [n, s1, s2] = &mut self.acc;
+            let (n, s1, s2) = (&mut n[..wu], &mut s1[..wu], &mut s2[..wu]);
+            for i in 0..wu {
+                n[i] += ac[i] - sc[i];
+                s1[i] += a1[i] - s1r[i];
+                s2[i] += a2[i] - s2r[i];
+                out[i] = std_of(n[i], s1[i], s2[i], k_row[i]);
+            }
+            return;
+        }
+        self.update(add, sub);
+        let [n, s1, s2] = &self.acc;
         for i in 0..wu {
-            let num = (n[i] * s2[i] - s1[i] * s1[i]).max(0.0) as f32;
-            let sd = num.sqrt() / n[i] as f32;
-            out[i] = if k_row[i].is_finite() { sd } else { f32::NAN };
+            out[i] = std_of(n[i], s1[i], s2[i], k_row[i]);
         }
     }
+}
+
+/// The standard deviation from the window's count `n`, `Σk` and `Σk²`, NaN where the pixel's own `k` is not finite:
+/// var = (n·Σk² − (Σk)²) / n², the numerator in f64, the division and the square root in f32.
+#[inline(always)]
+fn std_of(n: f64, s1: f64, s2: f64, k: f32) -> f32 {
+    let num = (n * s2 - s1 * s1).max(0.0) as f32;
+    let sd = num.sqrt() / n as f32;
+    if k.is_finite() { sd } else { f32::NAN }
 }
 
 /// Horizontal box sums over `W` pixels of the padded rows `pad` (count, Σk, Σk²) into `c`, `s1`, `s2`: one pass,
