@@ -55,7 +55,7 @@ pub(crate) fn principal(grad: &[[f32; 2]], hess: &[[f32; 3]]) -> Vec<[f32; 2]> {
 ///
 /// Feed the rows of K in order with [`WindowStd::push_row`]; row `y` of the result is available once rows up to
 /// `y + r` are in ([`WindowStd::out_row`], called for `y = 0, 1, …` in order). Per row: horizontal box sums
-/// `[count, Σk, Σk²]` in f64 over a padded row, kept in a ring of `w + 1` rows; vertically a running sum (add the
+/// `[count, Σk, Σk²]` in f64 (straight from the row for windows up to 7, over a padded copy beyond), kept in a ring of `w + 1` rows; vertically a running sum (add the
 /// row entering the window, subtract the row leaving), so the cost per pixel does not depend on the window height.
 pub(crate) struct WindowStd {
     /// Row length, half window and image height.
@@ -68,7 +68,7 @@ pub(crate) struct WindowStd {
     acc: [Vec<f64>; 3],
     /// Next row to add to `acc`.
     next_add: usize,
-    /// Padded row scratch (`wu + 2r`).
+    /// Padded row scratch (`wu + 2r`) of windows wider than 7.
     pad: [Vec<f64>; 3],
 }
 
@@ -91,6 +91,18 @@ impl WindowStd {
     /// Adds row `y` of K (rows in order).
     pub(crate) fn push_row(&mut self, y: usize, k: &[f32]) {
         let (wu, r) = (self.wu, self.r);
+        let slot = (y % (2 * r + 2)) * wu;
+        if r <= 3 {
+            let [rc, r1, r2] = &mut self.ring;
+            let (c, s1, s2) = (&mut rc[slot..slot + wu], &mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
+            match r {
+                0 => box_k::<0, 1>(&k[..wu], c, s1, s2),
+                1 => box_k::<1, 3>(&k[..wu], c, s1, s2),
+                2 => box_k::<2, 5>(&k[..wu], c, s1, s2),
+                _ => box_k::<3, 7>(&k[..wu], c, s1, s2),
+            }
+            return;
+        }
         let [pc, p1, p2] = &mut self.pad;
         let (pc, p1, p2) = (&mut pc[r..r + wu], &mut p1[r..r + wu], &mut p2[r..r + wu]);
         for (i, &v) in k[..wu].iter().enumerate() {
@@ -100,27 +112,18 @@ impl WindowStd {
             p1[i] = v;
             p2[i] = v * v;
         }
-        let slot = (y % (2 * r + 2)) * wu;
         let [rc, r1, r2] = &mut self.ring;
         let (c, s1, s2) = (&mut rc[slot..slot + wu], &mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
-        match r {
-            0 => box_row::<1>(&self.pad, c, s1, s2),
-            1 => box_row::<3>(&self.pad, c, s1, s2),
-            2 => box_row::<5>(&self.pad, c, s1, s2),
-            3 => box_row::<7>(&self.pad, c, s1, s2),
-            _ => {
-                let [pc, p1, p2] = &self.pad;
-                c.copy_from_slice(&pc[..wu]);
-                s1.copy_from_slice(&p1[..wu]);
-                s2.copy_from_slice(&p2[..wu]);
-                for j in 1..=2 * r {
-                    let (a, b, d) = (&pc[j..j + wu], &p1[j..j + wu], &p2[j..j + wu]);
-                    for i in 0..wu {
-                        c[i] += a[i];
-                        s1[i] += b[i];
-                        s2[i] += d[i];
-                    }
-                }
+        let [pc, p1, p2] = &self.pad;
+        c.copy_from_slice(&pc[..wu]);
+        s1.copy_from_slice(&p1[..wu]);
+        s2.copy_from_slice(&p2[..wu]);
+        for j in 1..=2 * r {
+            let (a, b, d) = (&pc[j..j + wu], &p1[j..j + wu], &p2[j..j + wu]);
+            for i in 0..wu {
+                c[i] += a[i];
+                s1[i] += b[i];
+                s2[i] += d[i];
             }
         }
     }
@@ -194,23 +197,50 @@ fn std_of(n: f64, s1: f64, s2: f64, k: f32) -> f32 {
     if k.is_finite() { sd } else { f32::NAN }
 }
 
-/// Horizontal box sums over `W` pixels of the padded rows `pad` (count, Σk, Σk²) into `c`, `s1`, `s2`: one pass,
-/// the window loop unrolled.
-fn box_row<const W: usize>(pad: &[Vec<f64>; 3], c: &mut [f64], s1: &mut [f64], s2: &mut [f64]) {
-    let wu = c.len();
-    let (s1, s2) = (&mut s1[..wu], &mut s2[..wu]);
-    let pc: [&[f64]; W] = std::array::from_fn(|j| &pad[0][j..j + wu]);
-    let p1: [&[f64]; W] = std::array::from_fn(|j| &pad[1][j..j + wu]);
-    let p2: [&[f64]; W] = std::array::from_fn(|j| &pad[2][j..j + wu]);
-    for i in 0..wu {
-        let (mut a, mut b, mut d) = (pc[0][i], p1[0][i], p2[0][i]);
+/// `[1, k, k²]` of a finite K value in f64, `[0, 0, 0]` otherwise (also the padding beyond the row ends).
+#[inline(always)]
+fn terms(v: f32) -> (f64, f64, f64) {
+    let ok = v.is_finite();
+    let x = if ok { f64::from(v) } else { 0.0 };
+    (if ok { 1.0 } else { 0.0 }, x, x * x)
+}
+
+/// Horizontal box sums over `W = 2R + 1` pixels (count, Σk, Σk²) of the row `k` into `c`, `s1`, `s2`, straight from
+/// K: the sum of each pixel runs over its window left to right, the padding beyond the row ends adding zeros (the
+/// window loop unrolled; the interior vectorises across pixels).
+fn box_k<const R: usize, const W: usize>(k: &[f32], c: &mut [f64], s1: &mut [f64], s2: &mut [f64]) {
+    let wu = k.len();
+    let (c, s1, s2) = (&mut c[..wu], &mut s1[..wu], &mut s2[..wu]);
+    let at = |i: usize, j: usize| {
+        let t = (i + j).wrapping_sub(R);
+        if t < wu { terms(k[t]) } else { (0.0, 0.0, 0.0) }
+    };
+    let mut edge = |i: usize| {
+        let (mut a, mut b, mut d) = at(i, 0);
         for j in 1..W {
-            a += pc[j][i];
-            b += p1[j][i];
-            d += p2[j][i];
+            let (x, y, z) = at(i, j);
+            a += x;
+            b += y;
+            d += z;
         }
-        c[i] = a;
-        s1[i] = b;
-        s2[i] = d;
+        (c[i], s1[i], s2[i]) = (a, b, d);
+    };
+    if wu <= 2 * R {
+        (0..wu).for_each(&mut edge);
+        return;
+    }
+    (0..R).chain(wu - R..wu).for_each(&mut edge);
+    let m = wu - 2 * R;
+    let ks: [&[f32]; W] = std::array::from_fn(|j| &k[j..j + m]);
+    let (c, s1, s2) = (&mut c[R..R + m], &mut s1[R..R + m], &mut s2[R..R + m]);
+    for i in 0..m {
+        let (mut a, mut b, mut d) = terms(ks[0][i]);
+        for j in 1..W {
+            let (x, y, z) = terms(ks[j][i]);
+            a += x;
+            b += y;
+            d += z;
+        }
+        (c[i], s1[i], s2[i]) = (a, b, d);
     }
 }
