@@ -55,21 +55,25 @@ pub(crate) fn principal(grad: &[[f32; 2]], hess: &[[f32; 3]]) -> Vec<[f32; 2]> {
 ///
 /// Feed the rows of K in order with [`WindowStd::push_row`]; row `y` of the result is available once rows up to
 /// `y + r` are in ([`WindowStd::out_row`], called for `y = 0, 1, …` in order). Per row: horizontal box sums
-/// `[count, Σk, Σk²]` in f64 (straight from the row for windows up to 7, over a padded copy beyond), kept in a ring of `w + 1` rows; vertically a running sum (add the
-/// row entering the window, subtract the row leaving), so the cost per pixel does not depend on the window height.
+/// `[count, Σk, Σk²]` (the count in f32, exact; the sums in f64; straight from the row for windows up to 7, over a
+/// padded copy beyond), kept in a ring of `w + 1` rows; vertically a running sum (add the row entering the window,
+/// subtract the row leaving), so the cost per pixel does not depend on the window height.
 pub(crate) struct WindowStd {
     /// Row length, half window and image height.
     wu: usize,
     r: usize,
     hu: usize,
-    /// Ring of horizontal sums, `w + 1` rows of `wu` each: count, Σk, Σk².
-    ring: [Vec<f64>; 3],
-    /// Vertical running sums of the current output row.
-    acc: [Vec<f64>; 3],
+    /// Ring of horizontal sums, `w + 1` rows of `wu` each: the count (small integers, exact in f32), Σk and Σk².
+    ring_n: Vec<f32>,
+    ring: [Vec<f64>; 2],
+    /// Vertical running sums of the current output row (count, Σk, Σk²).
+    acc_n: Vec<f32>,
+    acc: [Vec<f64>; 2],
     /// Next row to add to `acc`.
     next_add: usize,
-    /// Padded row scratch (`wu + 2r`) of windows wider than 7.
-    pad: [Vec<f64>; 3],
+    /// Padded row scratch (`wu + 2r`) of windows wider than 7: count, k, k².
+    pad_n: Vec<f32>,
+    pad: [Vec<f64>; 2],
 }
 
 impl WindowStd {
@@ -81,9 +85,12 @@ impl WindowStd {
             wu,
             r,
             hu,
+            ring_n: vec![0.0; slots * wu],
             ring: std::array::from_fn(|_| vec![0.0; slots * wu]),
+            acc_n: vec![0.0; wu],
             acc: std::array::from_fn(|_| vec![0.0; wu]),
             next_add: 0,
+            pad_n: vec![0.0; wu + 2 * r],
             pad: std::array::from_fn(|_| vec![0.0; wu + 2 * r]),
         }
     }
@@ -93,8 +100,9 @@ impl WindowStd {
         let (wu, r) = (self.wu, self.r);
         let slot = (y % (2 * r + 2)) * wu;
         if r <= 3 {
-            let [rc, r1, r2] = &mut self.ring;
-            let (c, s1, s2) = (&mut rc[slot..slot + wu], &mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
+            let [r1, r2] = &mut self.ring;
+            let c = &mut self.ring_n[slot..slot + wu];
+            let (s1, s2) = (&mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
             match r {
                 0 => box_k::<0, 1>(&k[..wu], c, s1, s2),
                 1 => box_k::<1, 3>(&k[..wu], c, s1, s2),
@@ -103,8 +111,8 @@ impl WindowStd {
             }
             return;
         }
-        let [pc, p1, p2] = &mut self.pad;
-        let (pc, p1, p2) = (&mut pc[r..r + wu], &mut p1[r..r + wu], &mut p2[r..r + wu]);
+        let [p1, p2] = &mut self.pad;
+        let (pc, p1, p2) = (&mut self.pad_n[r..r + wu], &mut p1[r..r + wu], &mut p2[r..r + wu]);
         for (i, &v) in k[..wu].iter().enumerate() {
             let ok = v.is_finite();
             let v = if ok { f64::from(v) } else { 0.0 };
@@ -112,9 +120,10 @@ impl WindowStd {
             p1[i] = v;
             p2[i] = v * v;
         }
-        let [rc, r1, r2] = &mut self.ring;
-        let (c, s1, s2) = (&mut rc[slot..slot + wu], &mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
-        let [pc, p1, p2] = &self.pad;
+        let [r1, r2] = &mut self.ring;
+        let c = &mut self.ring_n[slot..slot + wu];
+        let (s1, s2) = (&mut r1[slot..slot + wu], &mut r2[slot..slot + wu]);
+        let ([p1, p2], pc) = (&self.pad, &self.pad_n);
         c.copy_from_slice(&pc[..wu]);
         s1.copy_from_slice(&p1[..wu]);
         s2.copy_from_slice(&p2[..wu]);
@@ -130,20 +139,10 @@ impl WindowStd {
 
     /// Adds ring row `add` to the running sums and removes ring row `sub` (either may be absent).
     fn update(&mut self, add: Option<usize>, sub: Option<usize>) {
-        let wu = self.wu;
-        let slots = 2 * self.r + 2;
+        let (wu, slots) = (self.wu, 2 * self.r + 2);
+        running_update(&mut self.acc_n, &self.ring_n, wu, slots, add, sub);
         for (acc, ring) in self.acc.iter_mut().zip(&self.ring) {
-            let row = |yy: usize| &ring[(yy % slots) * wu..(yy % slots + 1) * wu];
-            match (add, sub) {
-                (Some(a), Some(s)) => {
-                    for ((acc, &a), &s) in acc.iter_mut().zip(row(a)).zip(row(s)) {
-                        *acc += a - s;
-                    }
-                }
-                (Some(a), None) => acc.iter_mut().zip(row(a)).for_each(|(acc, &a)| *acc += a),
-                (None, Some(s)) => acc.iter_mut().zip(row(s)).for_each(|(acc, &s)| *acc -= s),
-                (None, None) => {}
-            }
+            running_update(acc, ring, wu, slots, add, sub);
         }
     }
 
@@ -162,16 +161,12 @@ impl WindowStd {
         if let (Some(a), Some(s)) = (add, sub) {
             // The usual row: the running-sum update (as in `update`) and the output in one loop.
             let slots = 2 * r + 2;
-            fn ring_row(ring: &[f64], yy: usize, slots: usize, wu: usize) -> &[f64] {
-                let o = (yy % slots) * wu;
-                &ring[o..o + wu]
-            }
             let row = |ring, yy| ring_row(ring, yy, slots, wu);
-            let [rc, r1, r2] = &self.ring;
-            let (ac, sc, a1, s1r, a2, s2r) =
-                (row(rc, a), row(rc, s), row(r1, a), row(r1, s), row(r2, a), row(r2, s));
-            let [n, s1, s2] = &mut self.acc;
-            let (n, s1, s2) = (&mut n[..wu], &mut s1[..wu], &mut s2[..wu]);
+            let [r1, r2] = &self.ring;
+            let (ac, sc) = (ring_row(&self.ring_n, a, slots, wu), ring_row(&self.ring_n, s, slots, wu));
+            let (a1, s1r, a2, s2r) = (row(r1, a), row(r1, s), row(r2, a), row(r2, s));
+            let [s1, s2] = &mut self.acc;
+            let (n, s1, s2) = (&mut self.acc_n[..wu], &mut s1[..wu], &mut s2[..wu]);
             for i in 0..wu {
                 n[i] += ac[i] - sc[i];
                 s1[i] += a1[i] - s1r[i];
@@ -181,7 +176,7 @@ impl WindowStd {
             return;
         }
         self.update(add, sub);
-        let [n, s1, s2] = &self.acc;
+        let ([s1, s2], n) = (&self.acc, &self.acc_n);
         for i in 0..wu {
             out[i] = std_of(n[i], s1[i], s2[i], k_row[i]);
         }
@@ -191,15 +186,46 @@ impl WindowStd {
 /// The standard deviation from the window's count `n`, `Σk` and `Σk²`, NaN where the pixel's own `k` is not finite:
 /// var = (n·Σk² − (Σk)²) / n², the numerator in f64, the division and the square root in f32.
 #[inline(always)]
-fn std_of(n: f64, s1: f64, s2: f64, k: f32) -> f32 {
-    let num = (n * s2 - s1 * s1).max(0.0) as f32;
-    let sd = num.sqrt() / n as f32;
+fn std_of(n: f32, s1: f64, s2: f64, k: f32) -> f32 {
+    let num = (f64::from(n) * s2 - s1 * s1).max(0.0) as f32;
+    let sd = num.sqrt() / n;
     if k.is_finite() { sd } else { f32::NAN }
 }
 
-/// `[1, k, k²]` of a finite K value in f64, `[0, 0, 0]` otherwise (also the padding beyond the row ends).
+/// Row `yy` of a ring of `slots` rows of `wu`.
+fn ring_row<T>(ring: &[T], yy: usize, slots: usize, wu: usize) -> &[T] {
+    let o = (yy % slots) * wu;
+    &ring[o..o + wu]
+}
+
+/// Adds ring row `add` to the running sums `acc` and removes ring row `sub` (either may be absent).
+fn running_update<T>(
+    acc: &mut [T],
+    ring: &[T],
+    wu: usize,
+    slots: usize,
+    add: Option<usize>,
+    sub: Option<usize>,
+) where
+    T: Copy + std::ops::AddAssign + std::ops::SubAssign + std::ops::Sub<Output = T>,
+{
+    let row = |yy| ring_row(ring, yy, slots, wu);
+    match (add, sub) {
+        (Some(a), Some(s)) => {
+            for ((acc, &a), &s) in acc.iter_mut().zip(row(a)).zip(row(s)) {
+                *acc += a - s;
+            }
+        }
+        (Some(a), None) => acc.iter_mut().zip(row(a)).for_each(|(acc, &a)| *acc += a),
+        (None, Some(s)) => acc.iter_mut().zip(row(s)).for_each(|(acc, &s)| *acc -= s),
+        (None, None) => {}
+    }
+}
+
+/// `[1, k, k²]` of a finite K value (the count in f32, exact), `[0, 0, 0]` otherwise (also the padding beyond the
+/// row ends).
 #[inline(always)]
-fn terms(v: f32) -> (f64, f64, f64) {
+fn terms(v: f32) -> (f32, f64, f64) {
     let ok = v.is_finite();
     let x = if ok { f64::from(v) } else { 0.0 };
     (if ok { 1.0 } else { 0.0 }, x, x * x)
@@ -208,7 +234,7 @@ fn terms(v: f32) -> (f64, f64, f64) {
 /// Horizontal box sums over `W = 2R + 1` pixels (count, Σk, Σk²) of the row `k` into `c`, `s1`, `s2`, straight from
 /// K: the sum of each pixel runs over its window left to right, the padding beyond the row ends adding zeros (the
 /// window loop unrolled; the interior vectorises across pixels).
-fn box_k<const R: usize, const W: usize>(k: &[f32], c: &mut [f64], s1: &mut [f64], s2: &mut [f64]) {
+fn box_k<const R: usize, const W: usize>(k: &[f32], c: &mut [f32], s1: &mut [f64], s2: &mut [f64]) {
     let wu = k.len();
     let (c, s1, s2) = (&mut c[..wu], &mut s1[..wu], &mut s2[..wu]);
     let at = |i: usize, j: usize| {
