@@ -20,9 +20,9 @@
 //! **General path** (windows clipped by the border or holding no-data): the plane and the quadratic are fitted to the
 //! window's valid pixels alone (window coordinates, depths relative to the centre pixel, f64). If the window clipped
 //! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
-//! computed once (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away from the sides share
-//! one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are solved (the quadratic by
-//! `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (of a window clipped by
+//! computed once (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away from the sides
+//! share one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are solved (the
+//! quadratic by `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (of a window clipped by
 //! the border, the valid pixels' terms), exact because its entries are integers.
 
 use crate::plane;
