@@ -15,8 +15,8 @@ pub(crate) struct Scene {
 }
 
 /// Finite-difference features over 3×3 windows (all 9 pixels must be finite, else NaN):
-/// plane slopes by least squares, second derivatives by central differences, K, H, principal
-/// curvatures, curvedness, and the std of K over the 3×3 window of finite K values.
+/// plane slopes by least squares, second derivatives by central differences, K, H, curvedness
+/// (from the principal curvatures), and the std of K over the 3×3 window of finite K values.
 pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
     let (w, h) = range.dimensions();
     let nan3 = [f32::NAN; 3];
@@ -36,11 +36,8 @@ pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
         Some(m)
     };
     let mut plane = Grid::new(w, h, nan3);
-    let mut gradient = Grid::new(w, h, [f32::NAN; 2]);
-    let mut hessian = Grid::new(w, h, nan3);
     let mut k = Grid::new(w, h, f32::NAN);
     let mut hm = Grid::new(w, h, f32::NAN);
-    let mut principal = Grid::new(w, h, [f32::NAN; 2]);
     let mut curvedness = Grid::new(w, h, f32::NAN);
     for y in 0..h {
         for x in 0..w {
@@ -57,11 +54,8 @@ pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
             let disc = (hh * hh - kk).max(0.0).sqrt();
             let (k1, k2) = (hh + disc, hh - disc);
             plane[(x, y)] = [a, b, c];
-            gradient[(x, y)] = [a, b];
-            hessian[(x, y)] = [ixx, ixy, iyy];
             k[(x, y)] = kk;
             hm[(x, y)] = hh;
-            principal[(x, y)] = [k1, k2];
             curvedness[(x, y)] = ((k1 * k1 + k2 * k2) / 2.0).sqrt();
         }
     }
