@@ -13,7 +13,7 @@
 //!     [--mode regions|components] [--no-unlabelled-core] [--support 0.3] [--merge-angle 10] [--merge-residual 2] [--support-px 2] [--no-merge-within] [--rms-ratio 1.5] [--seg-supported] [--tune]
 //! ```
 //! `ONLY=i` in the environment restricts the run to `abw.train.i`. `--seg-supported` gives the final
-//! segmentation the support-tested edge map instead of the full relaxed sets (the pipeline's choice).
+//! segmentation the support-tested edge map instead of the full relaxed sets (which the pipeline gives it).
 //! `--tune` sweeps `t_d_px × lambda` on the training split and prints one summary line per pair.
 #![allow(clippy::print_stdout)] // an example reports on stdout
 
@@ -154,7 +154,10 @@ fn main() -> Result<()> {
     }
     params.validate().map_err(anyhow::Error::msg)?;
     sp.validate().map_err(anyhow::Error::msg)?;
-    let only: Option<u32> = std::env::var("ONLY").ok().map(|v| v.parse().unwrap());
+    let only: Option<u32> = match std::env::var("ONLY") {
+        Ok(v) => Some(v.parse().with_context(|| format!("ONLY={v:?}: not an image index"))?),
+        Err(_) => None,
+    };
     let images: Vec<Prepared> = (0..10u32)
         .filter(|i| only.is_none_or(|o| o == *i))
         .collect::<Vec<_>>()

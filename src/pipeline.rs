@@ -98,8 +98,7 @@ pub fn finish(
     let (relaxed, relax_info) = if config.pipeline.relax {
         relax::relax(&regions.c1, &s1, &canny.edges, &canny.magnitude, &valid, &config.relax, config.seed)
     } else {
-        let edges =
-            Grid::from_fn(range.width(), range.height(), |x, y| regions.c1[(x, y)] || canny.edges[(x, y)]);
+        let edges = relax::union(&regions.c1, &canny.edges);
         let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
         (relaxed, relax::Info::default())
     };

@@ -114,11 +114,7 @@ impl WindowStd {
         let [p1, p2] = &mut self.pad;
         let (pc, p1, p2) = (&mut self.pad_n[r..r + wu], &mut p1[r..r + wu], &mut p2[r..r + wu]);
         for (i, &v) in k[..wu].iter().enumerate() {
-            let ok = v.is_finite();
-            let v = if ok { f64::from(v) } else { 0.0 };
-            pc[i] = if ok { 1.0 } else { 0.0 };
-            p1[i] = v;
-            p2[i] = v * v;
+            (pc[i], p1[i], p2[i]) = terms(v);
         }
         let [r1, r2] = &mut self.ring;
         let c = &mut self.ring_n[slot..slot + wu];

@@ -707,7 +707,6 @@ impl<'a> RowFitter<'a> {
             }
         }
         let (has_plane, has_quad) = (kernel.has_plane, quad && kernel.has_quad);
-        let y0 = y as f64 - self.cy;
         let mut refit = false;
         for i in 0..m {
             let x = r + i;
@@ -715,21 +714,10 @@ impl<'a> RowFitter<'a> {
                 refit = true;
                 continue;
             }
-            plane[x] = if has_plane {
-                let (a, b, c) = (acc[i], acc[m + i], acc[2 * m + i]);
-                let zc = f64::from(zc[i]);
-                [a as f32, b as f32, (zc + c - a * self.xoff[x] - b * y0) as f32]
-            } else {
-                [f32::NAN; 3]
-            };
-            if quad {
-                (grad[x], hess[x]) = if has_quad {
-                    let q = |j: usize| acc[(3 + j) * m + i];
-                    ([q(1) as f32, q(2) as f32], [(2.0 * q(3)) as f32, q(4) as f32, (2.0 * q(5)) as f32])
-                } else {
-                    ([f32::NAN; 2], [f32::NAN; 3])
-                };
-            }
+            let p = [acc[i], acc[m + i], acc[2 * m + i]];
+            let q: [f64; 6] = std::array::from_fn(|j| acc[(3 + j) * m + i]);
+            let f = self.pixel_fit(x, y, f64::from(zc[i]), has_plane.then_some(p), has_quad.then_some(q));
+            self.put(x, f, plane, grad, hess);
         }
         if refit {
             for x in r..wu - r {

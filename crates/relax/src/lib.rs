@@ -159,12 +159,21 @@ impl Relaxed {
     /// C1 ∪ C2 of the annealed state, before the support test: the edges the final
     /// segmentation sees (it needs only one cue per border, see [`final_segmentation`]).
     pub fn union(&self) -> EdgeMap {
-        let mut u = self.c1.clone();
-        for (e, &b) in u.as_mut_slice().iter_mut().zip(self.c2.as_slice()) {
-            *e |= b;
-        }
-        u
+        union(&self.c1, &self.c2)
     }
+}
+
+/// The union `a ∪ b` of two edge maps of one size.
+///
+/// # Panics
+/// If the sizes differ.
+pub fn union(a: &EdgeMap, b: &EdgeMap) -> EdgeMap {
+    assert!(a.same_size(b), "edge maps differ in size");
+    let mut u = a.clone();
+    for (e, &v) in u.as_mut_slice().iter_mut().zip(b.as_slice()) {
+        *e |= v;
+    }
+    u
 }
 
 /// Diagnostics of one [`relax`] run. Energies are in the (normalised) units of the crate docs.
@@ -455,10 +464,7 @@ pub fn relax(
     let (r1, r2) = st.maps(&best);
     let supported = if params.support_px > 0.0 { within(&r2, &p1, params.support_px) } else { r2.clone() };
     info.unsupported_c2 = count(&r2) - count(&supported);
-    let mut edges = r1.clone();
-    for (e, &b) in edges.as_mut_slice().iter_mut().zip(supported.as_slice()) {
-        *e |= b;
-    }
+    let edges = union(&r1, &supported);
     (Relaxed { c1: r1, c2: r2, edges }, info)
 }
 
