@@ -19,21 +19,19 @@ fn khd(ix: f32, iy: f32, l: f32, m: f32, nn: f32) -> (f32, f32, f32) {
     (k, h, d)
 }
 
-/// K, H and curvedness of one row from its derivatives `[Ix, Iy]` and `[Ixx, Ixy, Iyy]` (see [`khd`]); all slices
-/// have the row's length.
+/// K, H and curvedness of one row from its derivatives `[Ix, Iy, Ixx, Ixy, Iyy]` (see [`khd`]); all slices have
+/// the row's length.
 pub(crate) fn curvature_row(
-    grad: &[[f32; 2]],
-    hess: &[[f32; 3]],
+    deriv: &[Vec<f32>; 5],
     k_out: &mut [f32],
     h_out: &mut [f32],
     curvedness: &mut [f32],
 ) {
-    let n = grad.len();
-    let (hess, k_out, h_out, curvedness) =
-        (&hess[..n], &mut k_out[..n], &mut h_out[..n], &mut curvedness[..n]);
+    let n = k_out.len();
+    let [ix, iy, l, m, nn] = deriv.each_ref().map(|d| &d[..n]);
+    let (h_out, curvedness) = (&mut h_out[..n], &mut curvedness[..n]);
     for i in 0..n {
-        let ([ix, iy], [l, m, nn]) = (grad[i], hess[i]);
-        let (k, h, d) = khd(ix, iy, l, m, nn);
+        let (k, h, d) = khd(ix[i], iy[i], l[i], m[i], nn[i]);
         k_out[i] = k;
         h_out[i] = h;
         curvedness[i] = (h * h + d * d).sqrt();

@@ -20,13 +20,24 @@
 //! **General path** (windows clipped by the border or holding no-data): the plane and the quadratic are fitted to the
 //! window's valid pixels alone (window coordinates, depths relative to the centre pixel, f64). If the window clipped
 //! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
-//! computed once (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away from the sides
-//! share one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are solved (the
-//! quadratic by `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms (of a window clipped by
-//! the border, the valid pixels' terms), exact because its entries are integers.
+//! computed once per process (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away
+//! from the sides share one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are
+//! solved (the quadratic by `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms
+//! (of a window clipped by the border, the valid pixels' terms), exact because its entries are integers.
+
+use std::sync::OnceLock;
 
 use crate::plane;
 use crate::quadratic::{SgKernels, basis, cholesky_solve};
+
+/// One row of the quadratic fit's derivatives, one array per derivative: `[Ix, Iy, Ixx, Ixy, Iyy]` (structure of
+/// arrays, so that the fast path's stores and the curvatures' loads vectorise without shuffles).
+pub(crate) type DerivRow = [Vec<f32>; 5];
+
+/// A [`DerivRow`] of `wu` zeros.
+pub(crate) fn deriv_row(wu: usize) -> DerivRow {
+    std::array::from_fn(|_| vec![0.0; wu])
+}
 
 /// What a [`RowFitter`] fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,8 +95,6 @@ pub(crate) struct RowFitter<'a> {
     path: Path,
     /// Whether the derivatives are fitted too.
     fit: Fit,
-    /// Kernels of the clipped-window rectangles met so far, indexed by the rectangle (empty until first needed).
-    shapes: Vec<Option<ShapeKernel>>,
     /// Scratch of [`Self::shape_row`]: the nine sums per pixel (plane `a, b, c`, quadratic `c0..c5`), and per column
     /// whether the rectangle's rows hold no-data there.
     row_acc: Vec<f64>,
@@ -188,7 +197,6 @@ impl<'a> RowFitter<'a> {
             chk: vec![0.0; m],
             path,
             fit,
-            shapes: Vec::new(),
             row_acc: Vec::new(),
             row_bad: Vec::new(),
         }
@@ -281,36 +289,31 @@ impl<'a> RowFitter<'a> {
         }
     }
 
-    /// Fits output row `y` (rows must come in increasing order) into the three row slices (length `wu`); `grad`
-    /// and `hess` are left as they are for [`Fit::Plane`].
-    pub(crate) fn row(
-        &mut self,
-        y: usize,
-        plane: &mut [[f32; 3]],
-        grad: &mut [[f32; 2]],
-        hess: &mut [[f32; 3]],
-    ) {
+    /// Fits output row `y` (rows must come in increasing order) into `plane` and `deriv` (length `wu`); `deriv` is
+    /// left as it is for [`Fit::Plane`].
+    pub(crate) fn row(&mut self, y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         let (wu, hu, r) = (self.wu, self.hu, self.r);
-        assert!(plane.len() == wu && grad.len() == wu && hess.len() == wu, "row length");
+        assert!(plane.len() == wu && deriv.iter().all(|d| d.len() == wu), "row length");
         let fast_row = self.path != Path::General && wu > 2 * r && y >= r && y + r < hu;
         let (mut fast_lo, mut fast_hi) = (0, 0);
         if fast_row {
             (fast_lo, fast_hi) = (r, wu - r);
-            let (p, g, h) = (&mut plane[r..wu - r], &mut grad[r..wu - r], &mut hess[r..wu - r]);
+            let p = &mut plane[r..wu - r];
+            let [ix, iy, ixx, ixy, iyy] = deriv.each_mut().map(|d| &mut d[r..wu - r]);
             match (self.path, self.fit, r) {
-                (Path::Fast, Fit::Quadratic, 1) => self.fused::<1, 3, true>(y, p, g, h),
-                (Path::Fast, Fit::Quadratic, 2) => self.fused::<2, 5, true>(y, p, g, h),
-                (Path::Fast, Fit::Quadratic, 3) => self.fused::<3, 7, true>(y, p, g, h),
-                (Path::Fast, Fit::Plane, 1) => self.fused::<1, 3, false>(y, p, g, h),
-                (Path::Fast, Fit::Plane, 2) => self.fused::<2, 5, false>(y, p, g, h),
-                (Path::Fast, Fit::Plane, 3) => self.fused::<3, 7, false>(y, p, g, h),
+                (Path::Fast, Fit::Quadratic, 1) => self.fused::<1, 3, true>(y, p, ix, iy, ixx, ixy, iyy),
+                (Path::Fast, Fit::Quadratic, 2) => self.fused::<2, 5, true>(y, p, ix, iy, ixx, ixy, iyy),
+                (Path::Fast, Fit::Quadratic, 3) => self.fused::<3, 7, true>(y, p, ix, iy, ixx, ixy, iyy),
+                (Path::Fast, Fit::Plane, 1) => self.fused::<1, 3, false>(y, p, ix, iy, ixx, ixy, iyy),
+                (Path::Fast, Fit::Plane, 2) => self.fused::<2, 5, false>(y, p, ix, iy, ixx, ixy, iyy),
+                (Path::Fast, Fit::Plane, 3) => self.fused::<3, 7, false>(y, p, ix, iy, ixx, ixy, iyy),
                 _ => {
                     while self.next_row <= y + r {
                         self.row_pass(self.next_row);
                         self.next_row += 1;
                     }
                     self.moments(y);
-                    self.fast_row(y, p, g, h);
+                    self.fast_row(y, p, [ix, iy, ixx, ixy, iyy]);
                 }
             }
         }
@@ -319,11 +322,11 @@ impl<'a> RowFitter<'a> {
         let shape_row = !fast_row && self.path != Path::General && wu > 2 * r && r as i64 <= MAX_SHAPE_R;
         if shape_row {
             (fast_lo, fast_hi) = (r, wu - r);
-            self.shape_row(y, plane, grad, hess);
+            self.shape_row(y, plane, deriv);
         }
         for x in (0..fast_lo).chain(fast_hi..wu) {
             let f = self.general_fit(x, y);
-            self.put(x, f, plane, grad, hess);
+            self.put(x, f, plane, deriv);
         }
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
@@ -331,30 +334,24 @@ impl<'a> RowFitter<'a> {
             for x in fast_lo..fast_hi {
                 if !self.chk[x - r].is_finite() {
                     let f = self.general_fit(x, y);
-                    self.put(x, f, plane, grad, hess);
+                    self.put(x, f, plane, deriv);
                 }
             }
         }
     }
 
     /// Stores one pixel's fit at column `x`.
-    fn put(
-        &self,
-        x: usize,
-        f: PixelFit,
-        plane: &mut [[f32; 3]],
-        grad: &mut [[f32; 2]],
-        hess: &mut [[f32; 3]],
-    ) {
+    fn put(&self, x: usize, f: PixelFit, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         plane[x] = f.plane;
         if self.fit == Fit::Quadratic {
-            (grad[x], hess[x]) = (f.grad, f.hess);
+            let [ix, iy, ixx, ixy, iyy] = deriv;
+            ([ix[x], iy[x]], [ixx[x], ixy[x], iyy[x]]) = (f.grad, f.hess);
         }
     }
 
     /// Writes the fast-path fits of output row `y` from the moments (slices of length `wu − 2r`, x = r ..); the
     /// check value `chk` (sum of the moments) is non-finite where the window held no data.
-    fn fast_row(&mut self, y: usize, plane: &mut [[f32; 3]], grad: &mut [[f32; 2]], hess: &mut [[f32; 3]]) {
+    fn fast_row(&mut self, y: usize, plane: &mut [[f32; 3]], deriv: [&mut [f32]; 5]) {
         let (wu, r) = (self.wu, self.r);
         let m = wu - 2 * r;
         let (g, gd) = (self.gains, self.plane_gains);
@@ -380,11 +377,11 @@ impl<'a> RowFitter<'a> {
             };
         }
         if quad {
-            let (grad, hess) = (&mut grad[..m], &mut hess[..m]);
+            let [ix, iy, ixx, ixy, iyy] = deriv.map(|d| &mut d[..m]);
             for i in 0..m {
-                grad[i] = [g[0] * m10[i], g[1] * m01[i]];
+                (ix[i], iy[i]) = (g[0] * m10[i], g[1] * m01[i]);
                 let (c3, c4, c5) = (g[2] * m20[i], g[3] * m11[i], g[4] * m02[i]);
-                hess[i] = [2.0 * c3, c4, 2.0 * c5];
+                (ixx[i], ixy[i], iyy[i]) = (2.0 * c3, c4, 2.0 * c5);
             }
         }
     }
@@ -393,13 +390,20 @@ impl<'a> RowFitter<'a> {
     /// as `row_pass` + `moments` + `fast_row`, but fused into three loops whose inner loops over the window are
     /// unrolled (bit-identical results, far fewer memory passes). `Q`: fit the quadratic too ([`Fit::Quadratic`]);
     /// without it the quadratic's moments are not computed.
+    ///
+    /// The five derivative rows are separate arguments, not an array: only then does the compiler know they alias
+    /// nothing else, and the last loop vectorises.
     #[inline(never)] // inlined into `row`, its loops stop vectorising
+    #[allow(clippy::too_many_arguments)]
     fn fused<const R: usize, const W: usize, const Q: bool>(
         &mut self,
         y: usize,
         plane: &mut [[f32; 3]],
-        grad: &mut [[f32; 2]],
-        hess: &mut [[f32; 3]],
+        ix: &mut [f32],
+        iy: &mut [f32],
+        ixx: &mut [f32],
+        ixy: &mut [f32],
+        iyy: &mut [f32],
     ) {
         let wu = self.wu;
         let m = wu - 2 * R;
@@ -445,7 +449,9 @@ impl<'a> RowFitter<'a> {
         let zc = &src[y * wu + R..y * wu + R + m];
         let (v1, vp, c0) = (&self.v1[..wu], &self.vp[..wu], &self.c0[..wu]);
         let chk = &mut self.chk[..m];
-        let (plane, grad, hess) = (&mut plane[..m], &mut grad[..m], &mut hess[..m]);
+        let plane = &mut plane[..m];
+        let (ix, iy, ixx, ixy, iyy) =
+            (&mut ix[..m], &mut iy[..m], &mut ixx[..m], &mut ixy[..m], &mut iyy[..m]);
         let wf = W as f32;
         for i in 0..m {
             let (mut m10, mut m00) = (h1s[R][i], r0s[R][i]);
@@ -477,8 +483,8 @@ impl<'a> RowFitter<'a> {
                     m02 += vvp[j];
                 }
                 let (c3, c4, c5) = (g[2] * m20, g[3] * m11, g[4] * m02);
-                grad[i] = [c1, c2];
-                hess[i] = [2.0 * c3, c4, 2.0 * c5];
+                (ix[i], iy[i]) = (c1, c2);
+                (ixx[i], ixy[i], iyy[i]) = (2.0 * c3, c4, 2.0 * c5);
                 chk[i] = m00 + m10 + m01 + m20 + m11 + m02;
             } else {
                 chk[i] = m00 + m10 + m01;
@@ -610,8 +616,7 @@ impl<'a> RowFitter<'a> {
                 return None;
             }
         }
-        let key = self.shape_kernel([ulo, uhi, vlo, vhi]);
-        let kernel = self.shapes[key].as_ref().expect("just made");
+        let kernel = shape_kernel(self.r as i64, [ulo, uhi, vlo, vhi]);
         let quad = self.fit == Fit::Quadratic;
         // Each lane of `acc` sums its own weights times the depths in tap order (the plane's lanes 0..3, the
         // quadratic's 3..9); the plane-only mode needs the first 4 lanes (3 used).
@@ -641,28 +646,16 @@ impl<'a> RowFitter<'a> {
         Some(self.pixel_fit(x, y, zc, has_plane.then_some(p), has_quad.then_some(q)))
     }
 
-    /// The index in `shapes` of the kernels of the rectangle `[ulo, uhi] × [vlo, vhi]`, computed if new.
-    fn shape_kernel(&mut self, [ulo, uhi, vlo, vhi]: [i64; 4]) -> usize {
-        let r = self.r as i64;
-        let s = (r + 1) as usize;
-        let key = (((ulo + r) as usize * s + uhi as usize) * s + (vlo + r) as usize) * s + vhi as usize;
-        if self.shapes.is_empty() {
-            self.shapes = vec![None; s * s * s * s];
-        }
-        self.shapes[key].get_or_insert_with(|| ShapeKernel::new([ulo, uhi, vlo, vhi]));
-        key
-    }
-
     /// [`Self::shape_fit`] of the pixels `r..wu − r` of a top or bottom border row `y` (`wu > 2r`, `r ≤ 3`), whose
     /// clipped windows are all the same rectangle: each tap's kernel weights applied across the row (the same
     /// arithmetic in the same order per pixel, so bit-identical); pixels whose rectangle holds no-data go to
     /// [`Self::general_fit`].
     #[inline(never)]
-    fn shape_row(&mut self, y: usize, plane: &mut [[f32; 3]], grad: &mut [[f32; 2]], hess: &mut [[f32; 3]]) {
+    fn shape_row(&mut self, y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         let (wu, hu, r) = (self.wu, self.hu, self.r);
         let (ri, yi) = (r as i64, y as i64);
         let (vlo, vhi) = ((-yi).max(-ri), (hu as i64 - 1 - yi).min(ri));
-        let key = self.shape_kernel([-ri, ri, vlo, vhi]);
+        let kernel = shape_kernel(ri, [-ri, ri, vlo, vhi]);
         let m = wu - 2 * r;
         let quad = self.fit == Fit::Quadratic;
         let mut acc = std::mem::take(&mut self.row_acc);
@@ -678,7 +671,6 @@ impl<'a> RowFitter<'a> {
                 *b |= !z.is_finite();
             }
         }
-        let kernel = self.shapes[key].as_ref().expect("just made");
         let zc = &src[y * wu + r..y * wu + r + m];
         let (pa, qa) = acc.split_at_mut(3 * m);
         let [p0, p1, p2] = pa.get_disjoint_mut([0..m, m..2 * m, 2 * m..3 * m]).expect("disjoint");
@@ -717,13 +709,13 @@ impl<'a> RowFitter<'a> {
             let p = [acc[i], acc[m + i], acc[2 * m + i]];
             let q: [f64; 6] = std::array::from_fn(|j| acc[(3 + j) * m + i]);
             let f = self.pixel_fit(x, y, f64::from(zc[i]), has_plane.then_some(p), has_quad.then_some(q));
-            self.put(x, f, plane, grad, hess);
+            self.put(x, f, plane, deriv);
         }
         if refit {
             for x in r..wu - r {
                 if bad[x - r..=x + r].iter().any(|&b| b) {
                     let f = self.general_fit(x, y);
-                    self.put(x, f, plane, grad, hess);
+                    self.put(x, f, plane, deriv);
                 }
             }
         }
@@ -733,6 +725,18 @@ impl<'a> RowFitter<'a> {
 
 /// Largest half window whose clipped-rectangle kernels are cached ((r + 1)⁴ rectangles).
 const MAX_SHAPE_R: i64 = 3;
+
+/// The kernels of the rectangle `[ulo, uhi] × [vlo, vhi]` of window offsets of half window `r ≤ MAX_SHAPE_R`
+/// (`−r ≤ ulo ≤ 0 ≤ uhi ≤ r`, likewise v). They depend on the rectangle alone, so each is computed once per process,
+/// on first use, and shared read-only.
+fn shape_kernel(r: i64, [ulo, uhi, vlo, vhi]: [i64; 4]) -> &'static ShapeKernel {
+    const N: usize = ((MAX_SHAPE_R + 1) as usize).pow(4);
+    static KERNELS: [[OnceLock<ShapeKernel>; N]; MAX_SHAPE_R as usize + 1] =
+        [const { [const { OnceLock::new() }; N] }; MAX_SHAPE_R as usize + 1];
+    let s = (r + 1) as usize;
+    let key = (((ulo + r) as usize * s + uhi as usize) * s + (vlo + r) as usize) * s + vhi as usize;
+    KERNELS[r as usize][key].get_or_init(|| ShapeKernel::new([ulo, uhi, vlo, vhi]))
+}
 
 /// The least-squares kernels of one rectangle of window offsets (taps in row-major order).
 #[derive(Debug, Clone)]

@@ -123,44 +123,40 @@ fn compute_with(
         .then(|| fit::RowFitter::new(src, wu, hu, params.window_px, path, fit::Fit::Plane));
     let mut kstd = curvature::WindowStd::new(wu, hu, params.k_std_window_px);
     let rk = (params.k_std_window_px / 2) as usize;
+    // One row of derivatives (the curvatures' input), and of the derivative window's planes if they are not kept.
+    let mut deriv = fit::deriv_row(wu);
+    let mut scratch_plane = vec![[0.0f32; 3]; wu];
+    // Each output row is computed into a row buffer (every value of it is written) and appended: the output grids
+    // are written once, not filled first.
+    let mut plane_row = vec![[0.0f32; 3]; wu];
+    let [mut k_row, mut h_row, mut c_row, mut s_row] = std::array::from_fn(|_| vec![0.0f32; wu]);
     let n = wu * hu;
     let mut plane = empty(reuse.plane, n);
     let (mut k, mut hm, mut curvedness, mut k_std) =
         (empty(reuse.k, n), empty(reuse.h, n), empty(reuse.curvedness, n), empty(reuse.k_std, n));
-    // One row of derivatives (the curvatures' input), and of the derivative window's planes if they are not kept.
-    let (mut grad, mut hess) = (vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
-    let mut scratch_plane = vec![[0.0f32; 3]; wu];
-    let nan = f32::NAN;
     for y in 0..hu {
-        let row = y * wu..(y + 1) * wu;
-        plane.resize(row.end, [nan; 3]);
         match &mut plane_fitter {
-            None => quad.row(y, &mut plane[row.clone()], &mut grad, &mut hess),
+            None => quad.row(y, &mut plane_row, &mut deriv),
             Some(pf) => {
-                quad.row(y, &mut scratch_plane, &mut grad, &mut hess);
-                pf.row(y, &mut plane[row.clone()], &mut grad, &mut hess);
+                quad.row(y, &mut scratch_plane, &mut deriv);
+                pf.row(y, &mut plane_row, &mut deriv);
             }
         }
-        k.resize(row.end, nan);
-        hm.resize(row.end, nan);
-        curvedness.resize(row.end, nan);
-        curvature::curvature_row(
-            &grad,
-            &hess,
-            &mut k[row.clone()],
-            &mut hm[row.clone()],
-            &mut curvedness[row.clone()],
-        );
-        kstd.push_row(y, &k[row.clone()]);
+        plane.extend_from_slice(&plane_row);
+        curvature::curvature_row(&deriv, &mut k_row, &mut h_row, &mut c_row);
+        k.extend_from_slice(&k_row);
+        hm.extend_from_slice(&h_row);
+        curvedness.extend_from_slice(&c_row);
+        kstd.push_row(y, &k_row);
         if y >= rk {
             let yo = y - rk;
-            k_std.resize((yo + 1) * wu, nan);
-            kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut k_std[yo * wu..]);
+            kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut s_row);
+            k_std.extend_from_slice(&s_row);
         }
     }
     for yo in hu.saturating_sub(rk)..hu {
-        k_std.resize((yo + 1) * wu, nan);
-        kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut k_std[yo * wu..]);
+        kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut s_row);
+        k_std.extend_from_slice(&s_row);
     }
     let grid = |v| Grid::from_vec(w, h, v).expect("size matches");
     SurfaceFeatures {
@@ -211,13 +207,13 @@ fn derivatives_with(range: &RangeImage, window_px: u32, path: fit::Path) -> Deri
     let (w, h) = range.dimensions();
     let (wu, hu) = (w as usize, h as usize);
     let mut quad = fit::RowFitter::new(range.as_slice(), wu, hu, window_px, path, fit::Fit::Quadratic);
-    let mut scratch_plane = vec![[0.0f32; 3]; wu];
+    let (mut scratch_plane, mut deriv) = (vec![[0.0f32; 3]; wu], fit::deriv_row(wu));
     let (mut gradient, mut hessian) = (Vec::with_capacity(wu * hu), Vec::with_capacity(wu * hu));
     for y in 0..hu {
-        let row = y * wu..(y + 1) * wu;
-        gradient.resize(row.end, [f32::NAN; 2]);
-        hessian.resize(row.end, [f32::NAN; 3]);
-        quad.row(y, &mut scratch_plane, &mut gradient[row.clone()], &mut hessian[row]);
+        quad.row(y, &mut scratch_plane, &mut deriv);
+        let [ix, iy, ixx, ixy, iyy] = &deriv;
+        gradient.extend(ix.iter().zip(iy).map(|(&a, &b)| [a, b]));
+        hessian.extend(ixx.iter().zip(ixy).zip(iyy).map(|((&a, &b), &c)| [a, b, c]));
     }
     Derivatives {
         gradient: Grid::from_vec(w, h, gradient).expect("size matches"),
@@ -331,7 +327,14 @@ mod tests {
             let n = img.len();
             let (mut k, mut h, mut c) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
             let (g, s) = (d.gradient.as_slice(), d.hessian.as_slice());
-            curvature::curvature_row(g, s, &mut k, &mut h, &mut c);
+            let deriv = [
+                g.iter().map(|v| v[0]).collect(),
+                g.iter().map(|v| v[1]).collect(),
+                s.iter().map(|v| v[0]).collect(),
+                s.iter().map(|v| v[1]).collect(),
+                s.iter().map(|v| v[2]).collect(),
+            ];
+            curvature::curvature_row(&deriv, &mut k, &mut h, &mut c);
             let b = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(b(&k), b(f.k.as_slice()), "seed {seed}: K");
             assert_eq!(b(&h), b(f.h.as_slice()), "seed {seed}: H");

@@ -17,10 +17,10 @@ pub(crate) fn fit(range: &RangeImage, window_px: u32) -> PlaneMap {
     let mut fitter = RowFitter::new(range.as_slice(), wu, hu, window_px, Path::Fast, Fit::Plane);
     let mut plane = Vec::with_capacity(wu * hu);
     // The plane-only engine does not write these.
-    let (mut grad, mut hess) = (vec![[0.0f32; 2]; wu], vec![[0.0f32; 3]; wu]);
+    let mut deriv = crate::fit::deriv_row(wu);
     for y in 0..hu {
         plane.resize((y + 1) * wu, [f32::NAN; 3]);
-        fitter.row(y, &mut plane[y * wu..], &mut grad, &mut hess);
+        fitter.row(y, &mut plane[y * wu..(y + 1) * wu], &mut deriv);
     }
     PlaneMap::from_vec(w, h, plane).expect("size matches")
 }
