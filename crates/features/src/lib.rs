@@ -15,7 +15,7 @@
 //! separable f32 filters on differences of nearby depths (small constant cost per pixel); windows clipped by the
 //! border or holding no-data are fitted exactly to their valid pixels in f64. The curvatures (f32, in a form without
 //! cancellation at umbilics) and the running-sum standard deviation of K (f64 sums) follow in the same row loop,
-//! written straight into the output grids. [`fit_planes`] runs the engine's plane-only mode.
+//! each output row appended to its grid once. [`fit_planes`] runs the engine's plane-only mode.
 //! - [`shade`]: a Lambertian rendering for figures.
 //!
 //! No-data pixels (NaN) never enter a fit, and every output is NaN at no-data pixels.
@@ -108,7 +108,7 @@ fn empty<T>(g: Grid<T>, n: usize) -> Vec<T> {
 ///
 /// One pass over the output rows: the fits of row `y` (one engine, or a second, plane-only one if the plane and
 /// the derivative windows differ), its curvatures from the engine's derivative rows, and the standard deviation of
-/// K of row `y − r` (r = half the K window), written straight into the output grids.
+/// K of row `y − r` (r = half the K window), each appended to its output grid.
 fn compute_with(
     range: &RangeImage,
     params: &Params,
