@@ -15,7 +15,8 @@
 //! separable f32 filters on differences of nearby depths (small constant cost per pixel); windows clipped by the
 //! border or holding no-data are fitted exactly to their valid pixels in f64. The curvatures (f32, in a form without
 //! cancellation at umbilics) and the running-sum standard deviation of K (f64 sums) follow in the same row loop,
-//! each output row appended to its grid once. [`fit_planes`] runs the engine's plane-only mode.
+//! each output row written straight into its grid, once (new grids are zeroed memory from the allocator, never
+//! filled first). [`fit_planes`] runs the engine's plane-only mode.
 //! - [`shade`]: a Lambertian rendering for figures.
 //!
 //! No-data pixels (NaN) never enter a fit, and every output is NaN at no-data pixels.
@@ -95,20 +96,20 @@ pub fn compute_into(range: &RangeImage, params: &Params, out: &mut SurfaceFeatur
     *out = compute_with(range, params, fit::Path::Fast, buffers);
 }
 
-/// Empties `g`'s vector and reserves room for `n` values (reusing its memory).
-fn empty<T>(g: Grid<T>, n: usize) -> Vec<T> {
-    let mut v = g.into_vec();
-    v.clear();
-    v.reserve(n);
-    v
+/// `g`'s vector if it holds `n` values (they are all overwritten), else a new vector of `n` zeros: zeroed memory
+/// comes from the allocator's zeroed pages (`calloc`), so it is not filled first, and the stage writes each value
+/// once.
+fn reuse_or_zeroed<T: Copy + Default>(g: Grid<T>, n: usize) -> Vec<T> {
+    let v = g.into_vec();
+    if v.len() == n { v } else { vec![T::default(); n] }
 }
 
 /// [`compute`] without the checks; `path` selects the code of the full windows (the tests compare them); the
-/// output vectors reuse the memory of `reuse`'s grids.
+/// output grids reuse `reuse`'s where they have the image's size.
 ///
 /// One pass over the output rows: the fits of row `y` (one engine, or a second, plane-only one if the plane and
 /// the derivative windows differ), its curvatures from the engine's derivative rows, and the standard deviation of
-/// K of row `y − r` (r = half the K window), each appended to its output grid.
+/// K of row `y − r` (r = half the K window), each written straight into its output grid (every value of each row).
 fn compute_with(
     range: &RangeImage,
     params: &Params,
@@ -126,37 +127,32 @@ fn compute_with(
     // One row of derivatives (the curvatures' input), and of the derivative window's planes if they are not kept.
     let mut deriv = fit::deriv_row(wu);
     let mut scratch_plane = vec![[0.0f32; 3]; wu];
-    // Each output row is computed into a row buffer (every value of it is written) and appended: the output grids
-    // are written once, not filled first.
-    let mut plane_row = vec![[0.0f32; 3]; wu];
-    let [mut k_row, mut h_row, mut c_row, mut s_row] = std::array::from_fn(|_| vec![0.0f32; wu]);
     let n = wu * hu;
-    let mut plane = empty(reuse.plane, n);
-    let (mut k, mut hm, mut curvedness, mut k_std) =
-        (empty(reuse.k, n), empty(reuse.h, n), empty(reuse.curvedness, n), empty(reuse.k_std, n));
+    let mut plane = reuse_or_zeroed(reuse.plane, n);
+    let (mut k, mut hm, mut curvedness, mut k_std) = (
+        reuse_or_zeroed(reuse.k, n),
+        reuse_or_zeroed(reuse.h, n),
+        reuse_or_zeroed(reuse.curvedness, n),
+        reuse_or_zeroed(reuse.k_std, n),
+    );
+    let row = |y: usize| y * wu..(y + 1) * wu;
     for y in 0..hu {
         match &mut plane_fitter {
-            None => quad.row(y, &mut plane_row, &mut deriv),
+            None => quad.row(y, &mut plane[row(y)], &mut deriv),
             Some(pf) => {
                 quad.row(y, &mut scratch_plane, &mut deriv);
-                pf.row(y, &mut plane_row, &mut deriv);
+                pf.row(y, &mut plane[row(y)], &mut deriv);
             }
         }
-        plane.extend_from_slice(&plane_row);
-        curvature::curvature_row(&deriv, &mut k_row, &mut h_row, &mut c_row);
-        k.extend_from_slice(&k_row);
-        hm.extend_from_slice(&h_row);
-        curvedness.extend_from_slice(&c_row);
-        kstd.push_row(y, &k_row);
+        curvature::curvature_row(&deriv, &mut k[row(y)], &mut hm[row(y)], &mut curvedness[row(y)]);
+        kstd.push_row(y, &k[row(y)]);
         if y >= rk {
             let yo = y - rk;
-            kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut s_row);
-            k_std.extend_from_slice(&s_row);
+            kstd.out_row(yo, &k[row(yo)], &mut k_std[row(yo)]);
         }
     }
     for yo in hu.saturating_sub(rk)..hu {
-        kstd.out_row(yo, &k[yo * wu..(yo + 1) * wu], &mut s_row);
-        k_std.extend_from_slice(&s_row);
+        kstd.out_row(yo, &k[row(yo)], &mut k_std[row(yo)]);
     }
     let grid = |v| Grid::from_vec(w, h, v).expect("size matches");
     SurfaceFeatures {
@@ -286,13 +282,26 @@ mod tests {
         let big = image(37, 29, |x, y| 50.0 + 0.02 * x * x - 0.3 * y + if x > 20.0 { 4.0 } else { 0.0 });
         let mut small = image(11, 13, |x, y| 80.0 - 0.5 * x + 0.01 * y * y);
         small[(4, 4)] = NAN;
-        let p = Params::default();
+        // Same size as `big`, other content (holes, a no-data border row): reused grids are overwritten in place,
+        // so every value must be written, including where `big` had data and this one has none.
+        let mut other = random_image(7, 37, 29, 1.0, true);
+        for x in 0..37 {
+            other[(x, 0)] = NAN;
+        }
         let mut out = SurfaceFeatures::default();
-        // A first call on another size, then reuse: every value must be the new image's, bit for bit.
-        for img in [&big, &small, &big] {
-            compute_into(img, &p, &mut out);
-            assert_eq!(out.k.dimensions(), img.dimensions());
-            assert_eq!(bits(&out), bits(&compute(img, &p)));
+        for p in [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9 }] {
+            // A first call on another size, then reuse: every value must be the new image's, bit for bit.
+            for img in [&big, &small, &big, &other, &big, &other] {
+                // A value the call does not write keeps this marker (a NaN payload no stage produces).
+                let marker = f32::from_bits(0x7fc0_1234);
+                out.plane.as_mut_slice().fill([marker; 3]);
+                for g in [&mut out.k, &mut out.h, &mut out.curvedness, &mut out.k_std] {
+                    g.as_mut_slice().fill(marker);
+                }
+                compute_into(img, &p, &mut out);
+                assert_eq!(out.k.dimensions(), img.dimensions());
+                assert_eq!(bits(&out), bits(&compute(img, &p)));
+            }
         }
     }
 

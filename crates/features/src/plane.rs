@@ -15,12 +15,12 @@ pub(crate) fn fit(range: &RangeImage, window_px: u32) -> PlaneMap {
     let (w, h) = range.dimensions();
     let (wu, hu) = (w as usize, h as usize);
     let mut fitter = RowFitter::new(range.as_slice(), wu, hu, window_px, Path::Fast, Fit::Plane);
-    let mut plane = Vec::with_capacity(wu * hu);
+    // Zeroed memory is not filled first (the allocator's zeroed pages); the fitter writes every value of each row.
+    let mut plane = vec![[0.0f32; 3]; wu * hu];
     // The plane-only engine does not write these.
     let mut deriv = crate::fit::deriv_row(wu);
-    for y in 0..hu {
-        plane.resize((y + 1) * wu, [f32::NAN; 3]);
-        fitter.row(y, &mut plane[y * wu..(y + 1) * wu], &mut deriv);
+    for (y, row) in plane.chunks_exact_mut(wu.max(1)).enumerate() {
+        fitter.row(y, row, &mut deriv);
     }
     PlaneMap::from_vec(w, h, plane).expect("size matches")
 }
