@@ -22,13 +22,15 @@
 //! to the image is a rectangle without no-data (the image border), the least-squares kernels of that rectangle are
 //! computed once per process (for `w ≤ 7`) and applied (in the top and bottom border rows, where all pixels away
 //! from the sides share one rectangle, across the whole row at once). Otherwise the pixel's own normal equations are
-//! solved (the quadratic by `LDLᵀ` Cholesky); the normal matrix is the full window's minus the missing pixels' terms
-//! (of a window clipped by the border, the valid pixels' terms), exact because its entries are integers.
+//! solved (the quadratic by `LDLᵀ` Cholesky; windows inside the image that hold no-data four at a time, their
+//! solves side by side, bit-identical to one at a time); the normal matrix is the full window's minus the missing
+//! pixels' terms (of a window clipped by the border, the valid pixels' terms), exact because its entries are
+//! integers. A no-data pixel gets NaN without a fit.
 
 use std::sync::OnceLock;
 
 use crate::plane;
-use crate::quadratic::{SgKernels, basis, cholesky_solve};
+use crate::quadratic::{SgKernels, basis, cholesky_solve, cholesky_solve_lanes};
 
 /// One row of the quadratic fit's derivatives, one array per derivative: `[Ix, Iy, Ixx, Ixy, Iyy]` (structure of
 /// arrays, so that the fast path's stores and the curvatures' loads vectorise without shuffles).
@@ -99,7 +101,18 @@ pub(crate) struct RowFitter<'a> {
     /// whether the rectangle's rows hold no-data there.
     row_acc: Vec<f64>,
     row_bad: Vec<bool>,
+    /// Scratch of [`Self::row`]: the columns of the current row whose full window holds no-data (centre valid).
+    holed: Vec<usize>,
 }
+
+/// The nine sums of [`plane::solve`] (`[n, Σu, Σv, Σu², Σuv, Σv², Σz, Σuz, Σvz]`) from the general fit's packed
+/// normal matrix (lower triangle, row-major) and right-hand sides.
+fn plane_sums(packed: &[f64; 21], rhs: &[f64; 6]) -> [f64; 9] {
+    [packed[0], packed[1], packed[3], packed[2], packed[4], packed[5], rhs[0], rhs[1], rhs[2]]
+}
+
+/// Systems solved side by side by [`RowFitter::full_window_fits`].
+const LANES: usize = 4;
 
 /// Which code fits the full windows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -199,6 +212,7 @@ impl<'a> RowFitter<'a> {
             fit,
             row_acc: Vec::new(),
             row_bad: Vec::new(),
+            holed: Vec::new(),
         }
     }
 
@@ -331,12 +345,23 @@ impl<'a> RowFitter<'a> {
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
         if fast_row && fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
+            let zrow = &self.src[y * wu..(y + 1) * wu];
+            let mut holed = std::mem::take(&mut self.holed);
+            holed.clear();
             for x in fast_lo..fast_hi {
                 if !self.chk[x - r].is_finite() {
-                    let f = self.general_fit(x, y);
-                    self.put(x, f, plane, deriv);
+                    // No-data pixels (most of these in frames with large holes) need no fit.
+                    if zrow[x].is_finite() {
+                        holed.push(x);
+                    } else {
+                        self.put(x, NAN_FIT, plane, deriv);
+                    }
                 }
             }
+            for xs in holed.chunks(LANES) {
+                self.full_window_fits(xs, y, plane, deriv);
+            }
+            self.holed = holed;
         }
     }
 
@@ -522,11 +547,62 @@ impl<'a> RowFitter<'a> {
                 t += 1;
             }
         }
-        let sums = [n[0][0], n[1][0], n[2][0], n[1][1], n[2][1], n[2][2], rhs[0], rhs[1], rhs[2]];
-        let plane = plane::solve(&sums);
+        let plane = plane::solve(&plane_sums(&packed, &rhs));
         let quad =
             (self.fit == Fit::Quadratic && count >= 6 && cholesky_solve(&mut n, &mut rhs)).then_some(rhs);
         self.pixel_fit(x, y, zc, plane, quad)
+    }
+
+    /// [`Self::general_fit`] of up to [`LANES`] pixels of row `y` whose windows are inside the image (not clipped)
+    /// and whose centres are valid, stored into `plane` and `deriv`: the quadratics' `LDLᵀ` solves run side by side
+    /// ([`cholesky_solve_lanes`], bit-identical to one at a time). A window without no-data (a fast-path moment
+    /// overflowed) gets its full-window kernels, as in `general_fit`.
+    fn full_window_fits(&mut self, xs: &[usize], y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
+        let (wu, r) = (self.wu, self.r as i64);
+        let full = [-r, r, -r, r];
+        if self.fit != Fit::Quadratic || xs.len() == 1 {
+            for &x in xs {
+                let f = self.general_fit(x, y);
+                self.put(x, f, plane, deriv);
+            }
+            return;
+        }
+        // Lanes without a system (past `xs`, or fitted otherwise) hold the identity.
+        let mut n = [[[0.0f64; LANES]; 6]; 6];
+        for (i, row) in n.iter_mut().enumerate() {
+            row[i] = [1.0; LANES];
+        }
+        let mut rhs = [[0.0f64; LANES]; 6];
+        let mut lanes = [None; LANES];
+        let n_taps = ((2 * r + 1) * (2 * r + 1)) as usize;
+        for (l, &x) in xs.iter().enumerate() {
+            let zc = f64::from(self.src[y * wu + x]);
+            let (count, rl, packed) = self.normal_sums::<6, 21>(x, y, zc, full);
+            if count == n_taps
+                && r <= MAX_SHAPE_R
+                && let Some(f) = self.shape_fit(x, y, zc, full)
+            {
+                self.put(x, f, plane, deriv);
+                continue;
+            }
+            let mut t = 0;
+            for i in 0..6 {
+                for j in 0..=i {
+                    n[i][j][l] = packed[t];
+                    t += 1;
+                }
+                rhs[i][l] = rl[i];
+            }
+            lanes[l] = Some((x, zc, count, plane::solve(&plane_sums(&packed, &rl))));
+        }
+        let ok = cholesky_solve_lanes(&mut n, &mut rhs);
+        for (l, lane) in lanes.into_iter().enumerate() {
+            if let Some((x, zc, count, pl)) = lane {
+                let quad = (count >= 6 && ok[l]).then(|| std::array::from_fn(|i| rhs[i][l]));
+                let f = self.pixel_fit(x, y, zc, pl, quad);
+                self.put(x, f, plane, deriv);
+            }
+        }
     }
 
     /// The sums of the general fit over the valid pixels of the clipped window `[ulo, uhi] × [vlo, vhi]` around

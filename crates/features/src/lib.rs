@@ -653,9 +653,10 @@ mod tests {
     }
 
     #[test]
-    fn border_rows_and_columns_equal_the_general_path_bit_for_bit() {
+    fn exact_fits_equal_the_general_path_bit_for_bit() {
         // The fast path fits the top and bottom border rows a whole row at a time (and the side columns pixel by
-        // pixel): the same arithmetic as the general path's per-pixel fits, so the same bits, holes included.
+        // pixel), and the full windows holding no-data four at a time (their solves side by side): the same
+        // arithmetic as the general path's per-pixel fits, so the same bits.
         for (seed, window_px) in [(20u64, 3u32), (21, 5), (22, 7), (23, 5), (24, 9)] {
             let img = random_image(seed, 30 + seed as u32, 19, 1.0, seed % 2 == 0);
             let (w, h) = img.dimensions();
@@ -671,9 +672,14 @@ mod tests {
                 fit_planes(&img, window_px),
                 compute_with(&img, &p, fit::Path::General, SurfaceFeatures::default()).plane,
             ];
+            let mut holed = 0;
             for (x, y, q) in general.0.plane.enumerate() {
                 if y >= r && y + r < h && x >= r && x + r < w {
-                    continue;
+                    let window = (y - r..=y + r).flat_map(|v| (x - r..=x + r).map(move |u| (u, v)));
+                    if window.clone().all(|(u, v)| img[(u, v)].is_finite()) {
+                        continue;
+                    }
+                    holed += usize::from(img[(x, y)].is_finite());
                 }
                 let at = format!("seed {seed}, window {window_px}, ({x}, {y})");
                 let b = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
@@ -681,6 +687,53 @@ mod tests {
                 assert_eq!(b(&plane_mode[0][(x, y)]), b(&plane_mode[1][(x, y)]), "fit_planes at {at}");
                 assert_eq!(b(&fast.1.gradient[(x, y)]), b(&general.1.gradient[(x, y)]), "gradient at {at}");
                 assert_eq!(b(&fast.1.hessian[(x, y)]), b(&general.1.hessian[(x, y)]), "hessian at {at}");
+            }
+            assert!(holed >= 8, "seed {seed}: only {holed} full windows with no-data");
+        }
+    }
+
+    #[test]
+    fn side_by_side_solves_equal_single_solves_bit_for_bit() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        for trial in 0..50 {
+            // Normal matrices of random point sets (lane 2 of every other trial singular: 5 points), random sides.
+            let singular = |lane: usize| lane == 2 && trial % 2 == 0;
+            let systems: Vec<([[f64; 6]; 6], [f64; 6])> = (0..4)
+                .map(|lane| {
+                    let points = if singular(lane) { 5 } else { 6 + trial % 20 };
+                    let mut n = [[0.0; 6]; 6];
+                    for _ in 0..points {
+                        let b = quadratic::basis(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0));
+                        for i in 0..6 {
+                            for j in 0..=i {
+                                n[i][j] += b[i] * b[j];
+                            }
+                        }
+                    }
+                    (n, std::array::from_fn(|_| rng.random_range(-10.0..10.0)))
+                })
+                .collect();
+            let mut nl = [[[0.0; 4]; 6]; 6];
+            let mut rl = [[0.0; 4]; 6];
+            for (l, (n, rhs)) in systems.iter().enumerate() {
+                for i in 0..6 {
+                    for j in 0..6 {
+                        nl[i][j][l] = n[i][j];
+                    }
+                    rl[i][l] = rhs[i];
+                }
+            }
+            let ok = quadratic::cholesky_solve_lanes(&mut nl, &mut rl);
+            for (l, (n, rhs)) in systems.into_iter().enumerate() {
+                let (mut n, mut rhs) = (n, rhs);
+                let single = quadratic::cholesky_solve(&mut n, &mut rhs);
+                assert_eq!(ok[l], single, "trial {trial}, lane {l}: singular?");
+                assert_eq!(single, !singular(l), "trial {trial}, lane {l}");
+                if single {
+                    let lane: [f64; 6] = std::array::from_fn(|i| rl[i][l]);
+                    assert_eq!(lane.map(f64::to_bits), rhs.map(f64::to_bits), "trial {trial}, lane {l}");
+                }
             }
         }
     }

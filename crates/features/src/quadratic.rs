@@ -56,46 +56,76 @@ impl SgKernels {
 
 /// Solves `N c = rhs` in place for symmetric positive definite `N` (lower triangle used) by an `LDLᵀ`
 /// factorisation (no square roots, one division per column); false if (near) singular: a pivot `D_j` not above
-/// `1e-9 · N_jj`.
+/// `1e-9 · N_jj`. One system of [`cholesky_solve_lanes`].
 pub(crate) fn cholesky_solve(n: &mut [[f64; 6]; 6], rhs: &mut [f64; 6]) -> bool {
+    let mut nl = n.map(|row| row.map(|v| [v]));
+    let mut rl = rhs.map(|v| [v]);
+    let [ok] = cholesky_solve_lanes(&mut nl, &mut rl);
+    *n = nl.map(|row| row.map(|[v]| v));
+    *rhs = rl.map(|[v]| v);
+    ok
+}
+
+/// [`cholesky_solve`] of `L` independent systems at once, one per lane (`n[i][j][lane]`, `rhs[i][lane]`): each
+/// lane's arithmetic is the single system's, in the same order, so its result is bit-identical to solving it alone;
+/// the lanes run side by side (vector instructions, and the division chains of different systems overlap). A lane
+/// whose system is singular gets `false` and a meaningless solution, without effect on the other lanes.
+pub(crate) fn cholesky_solve_lanes<const L: usize>(
+    n: &mut [[[f64; L]; 6]; 6],
+    rhs: &mut [[f64; L]; 6],
+) -> [bool; L] {
     // After the loop, n[j][j] holds 1/D_j and n[i][j] (i > j) holds L_ij.
-    let mut d = [0.0f64; 6];
+    let mut ok = [true; L];
+    let mut d = [[0.0f64; L]; 6];
     for j in 0..6 {
         let diag0 = n[j][j];
         let mut dj = diag0;
         for k in 0..j {
-            dj -= n[j][k] * n[j][k] * d[k];
+            for l in 0..L {
+                dj[l] -= n[j][k][l] * n[j][k][l] * d[k][l];
+            }
         }
-        if dj.partial_cmp(&(1e-9 * diag0.max(1e-300))) != Some(std::cmp::Ordering::Greater) {
-            return false;
+        let mut inv = [0.0f64; L];
+        for l in 0..L {
+            ok[l] &= dj[l].partial_cmp(&(1e-9 * diag0[l].max(1e-300))) == Some(std::cmp::Ordering::Greater);
+            inv[l] = 1.0 / dj[l];
         }
         d[j] = dj;
-        let inv = 1.0 / dj;
         for i in j + 1..6 {
             let mut s = n[i][j];
             for k in 0..j {
-                s -= n[i][k] * n[j][k] * d[k];
+                for l in 0..L {
+                    s[l] -= n[i][k][l] * n[j][k][l] * d[k][l];
+                }
             }
-            n[i][j] = s * inv;
+            for l in 0..L {
+                n[i][j][l] = s[l] * inv[l];
+            }
         }
         n[j][j] = inv;
     }
     for i in 0..6 {
         let mut s = rhs[i];
         for k in 0..i {
-            s -= n[i][k] * rhs[k];
+            for l in 0..L {
+                s[l] -= n[i][k][l] * rhs[k][l];
+            }
         }
         rhs[i] = s;
     }
     for i in 0..6 {
-        rhs[i] *= n[i][i];
+        for l in 0..L {
+            rhs[i][l] *= n[i][i][l];
+        }
     }
     for i in (0..6).rev() {
         let mut s = rhs[i];
         for k in i + 1..6 {
-            s -= n[k][i] * rhs[k];
+            for l in 0..L {
+                s[l] -= n[k][i][l] * rhs[k][l];
+            }
         }
         rhs[i] = s;
     }
-    true
+    ok
 }
