@@ -1,4 +1,5 @@
-//! Divan benchmark of the whole pipeline on one 512×512 image: from a file on disk to written outputs.
+//! Divan benchmarks of the whole pipeline on one 512×512 image (from a file on disk to written outputs, and in
+//! memory), of the range image → C2 path, and of the features stage on frames with no-data.
 
 use rangeseg::Config;
 
@@ -48,4 +49,25 @@ fn range_to_c2(b: divan::Bencher) {
         let valid = rangeimage::valid_mask(&range);
         vcanny::detect_planes(&planes, &valid, &config.vcanny)
     });
+}
+
+/// `features::compute_into` (the output grids of the previous frame reused) on frames with no-data, whose windows
+/// take the general path: `abw.train.0` (projector shadows and dropouts, 512×512) and the TUM RGB-D Kinect frame of
+/// `data/real` (640×480, 19 % no data).
+#[divan::bench(args = ["abw.train.0", "tum-kinect"])]
+fn features_with_holes(b: divan::Bencher, frame: &str) {
+    let range = match frame {
+        "abw.train.0" => {
+            let (params, seed) = scenegen::benchmark_image(false, 0);
+            scenegen::generate(&params, seed).range.map(|&v| if v == 0 { f32::NAN } else { f32::from(v) })
+        }
+        _ => {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("data/real/open3d-testdata/RGBD/other_formats/TUM_depth.png");
+            rangeio::read(&path, &Default::default()).expect("read the TUM frame").range
+        }
+    };
+    let params = Config::default().features;
+    let mut out = features::compute(&range, &params);
+    b.bench_local(|| features::compute_into(divan::black_box(&range), &params, &mut out));
 }

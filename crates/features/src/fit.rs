@@ -345,16 +345,21 @@ impl<'a> RowFitter<'a> {
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
         if fast_row && fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
-            let zrow = &self.src[y * wu..(y + 1) * wu];
+            let zrow = &self.src[y * wu + fast_lo..y * wu + fast_hi];
+            let chk = &self.chk[..fast_hi - fast_lo];
+            let quad = self.fit == Fit::Quadratic;
             let mut holed = std::mem::take(&mut self.holed);
             holed.clear();
-            for x in fast_lo..fast_hi {
-                if !self.chk[x - r].is_finite() {
-                    // No-data pixels (most of these in frames with large holes) need no fit.
-                    if zrow[x].is_finite() {
+            for (x, (c, z)) in (fast_lo..).zip(chk.iter().zip(zrow)) {
+                if !c.is_finite() {
+                    if z.is_finite() {
                         holed.push(x);
                     } else {
-                        self.put(x, NAN_FIT, plane, deriv);
+                        // No-data pixels (most of these in frames with large holes) need no fit.
+                        plane[x] = NAN_FIT.plane;
+                        if quad {
+                            deriv.iter_mut().for_each(|d| d[x] = f32::NAN);
+                        }
                     }
                 }
             }
