@@ -234,7 +234,13 @@ fn tables(r: &Report) -> Vec<Table> {
         ),
         (
             "Per-stage timings (ms per image, mean ± std)",
-            format!("{} images on {} threads; whole evaluation {:.1} s wall time.", rows.len(), r.threads, r.wall_s),
+            format!(
+                "{} images on {} thread{}; whole evaluation {:.1} s wall time.",
+                rows.len(),
+                r.threads,
+                if r.threads == 1 { "" } else { "s" },
+                r.wall_s
+            ),
             vec!["read", "features", "regiongrow", "vcanny", "relax + final", "write", "total"],
             timings,
         ),
