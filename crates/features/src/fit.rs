@@ -350,15 +350,21 @@ impl<'a> RowFitter<'a> {
             let quad = self.fit == Fit::Quadratic;
             let mut holed = std::mem::take(&mut self.holed);
             holed.clear();
-            for (x, (c, z)) in (fast_lo..).zip(chk.iter().zip(zrow)) {
-                if !c.is_finite() {
-                    if z.is_finite() {
-                        holed.push(x);
-                    } else {
-                        // No-data pixels (most of these in frames with large holes) need no fit.
-                        plane[x] = NAN_FIT.plane;
-                        if quad {
-                            deriv.iter_mut().for_each(|d| d[x] = f32::NAN);
+            // In blocks of 16 pixels: a block without a non-finite check value (most) is passed over at once.
+            for (x0, (cs, zs)) in (fast_lo..).step_by(16).zip(chk.chunks(16).zip(zrow.chunks(16))) {
+                if cs.iter().fold(0, |bad, v| bad | non_finite(v)) == 0 {
+                    continue;
+                }
+                for (x, (c, z)) in (x0..).zip(cs.iter().zip(zs)) {
+                    if !c.is_finite() {
+                        if z.is_finite() {
+                            holed.push(x);
+                        } else {
+                            // No-data pixels (most of these in frames with large holes) need no fit.
+                            plane[x] = NAN_FIT.plane;
+                            if quad {
+                                deriv.iter_mut().for_each(|d| d[x] = f32::NAN);
+                            }
                         }
                     }
                 }
@@ -578,6 +584,8 @@ impl<'a> RowFitter<'a> {
             row[i] = [1.0; LANES];
         }
         let mut rhs = [[0.0f64; LANES]; 6];
+        // The plane's nine sums per lane (zeros in lanes without a system, which `solve_lanes` rejects).
+        let mut sums = [[0.0f64; LANES]; 9];
         let mut lanes = [None; LANES];
         let n_taps = ((2 * r + 1) * (2 * r + 1)) as usize;
         for (l, &x) in xs.iter().enumerate() {
@@ -598,13 +606,17 @@ impl<'a> RowFitter<'a> {
                 }
                 rhs[i][l] = rl[i];
             }
-            lanes[l] = Some((x, zc, count, plane::solve(&plane_sums(&packed, &rl))));
+            for (s, v) in sums.iter_mut().zip(plane_sums(&packed, &rl)) {
+                s[l] = v;
+            }
+            lanes[l] = Some((x, zc, count));
         }
+        let planes = plane::solve_lanes(&sums);
         let ok = cholesky_solve_lanes(&mut n, &mut rhs);
         for (l, lane) in lanes.into_iter().enumerate() {
-            if let Some((x, zc, count, pl)) = lane {
+            if let Some((x, zc, count)) = lane {
                 let quad = (count >= 6 && ok[l]).then(|| std::array::from_fn(|i| rhs[i][l]));
-                let f = self.pixel_fit(x, y, zc, pl, quad);
+                let f = self.pixel_fit(x, y, zc, planes[l], quad);
                 self.put(x, f, plane, deriv);
             }
         }

@@ -26,27 +26,38 @@ pub(crate) fn fit(range: &RangeImage, window_px: u32) -> PlaneMap {
 }
 
 /// Solves the 3-parameter normal equations from the nine sums `[n, Σx, Σy, Σx², Σxy, Σy², Σz, Σxz, Σyz]`;
-/// `None` when fewer than 3 points or (near) collinear.
+/// `None` when fewer than 3 points or (near) collinear. One system of [`solve_lanes`].
 #[inline]
 pub(crate) fn solve(s: &[f64; 9]) -> Option<[f64; 3]> {
-    let n = s[0];
-    if n < 2.5 {
-        return None;
+    let [r] = solve_lanes(&s.map(|v| [v]));
+    r
+}
+
+/// [`solve`] of `L` independent systems at once, one per lane (`s[sum][lane]`): each lane's arithmetic is the
+/// single system's, in the same order, so its result is bit-identical to solving it alone; the lanes run side by
+/// side (their divisions overlap).
+#[inline]
+pub(crate) fn solve_lanes<const L: usize>(s: &[[f64; L]; 9]) -> [Option<[f64; 3]>; L] {
+    let mut out = [None; L];
+    for l in 0..L {
+        let n = s[0][l];
+        let (sx, sy) = (s[1][l], s[2][l]);
+        let cxx = s[3][l] - sx * sx / n;
+        let cxy = s[4][l] - sx * sy / n;
+        let cyy = s[5][l] - sy * sy / n;
+        let det = cxx * cyy - cxy * cxy;
+        // NaN-safe: a NaN determinant fails `det > …` and is rejected.
+        let reject = n < 2.5
+            || det.partial_cmp(&(1e-9 * cxx * cyy)) != Some(std::cmp::Ordering::Greater)
+            || cxx <= 0.0
+            || cyy <= 0.0;
+        let mz = s[6][l] / n;
+        let cxz = s[7][l] - sx * mz;
+        let cyz = s[8][l] - sy * mz;
+        let a = (cyy * cxz - cxy * cyz) / det;
+        let b = (cxx * cyz - cxy * cxz) / det;
+        let c = mz - a * sx / n - b * sy / n;
+        out[l] = (!reject).then_some([a, b, c]);
     }
-    let (sx, sy) = (s[1], s[2]);
-    let cxx = s[3] - sx * sx / n;
-    let cxy = s[4] - sx * sy / n;
-    let cyy = s[5] - sy * sy / n;
-    let det = cxx * cyy - cxy * cxy;
-    // NaN-safe: a NaN determinant fails `det > …` and is rejected.
-    if det.partial_cmp(&(1e-9 * cxx * cyy)) != Some(std::cmp::Ordering::Greater) || cxx <= 0.0 || cyy <= 0.0 {
-        return None;
-    }
-    let mz = s[6] / n;
-    let cxz = s[7] - sx * mz;
-    let cyz = s[8] - sy * mz;
-    let a = (cyy * cxz - cxy * cyz) / det;
-    let b = (cxx * cyz - cxy * cxz) / det;
-    let c = mz - a * sx / n - b * sy / n;
-    Some([a, b, c])
+    out
 }
