@@ -565,9 +565,9 @@ impl<'a> RowFitter<'a> {
     }
 
     /// [`Self::general_fit`] of up to [`LANES`] pixels of row `y` whose windows are inside the image (not clipped)
-    /// and whose centres are valid, stored into `plane` and `deriv`: the quadratics' `LDLᵀ` solves run side by side
-    /// ([`cholesky_solve_lanes`], bit-identical to one at a time). A window without no-data (a fast-path moment
-    /// overflowed) gets its full-window kernels, as in `general_fit`.
+    /// and whose centres are valid, stored into `plane` and `deriv`: the planes' and the quadratics' solves run side
+    /// by side ([`plane::solve_lanes`], [`cholesky_solve_lanes`]; bit-identical to one at a time). A window without
+    /// no-data (a fast-path moment overflowed) gets its full-window kernels, as in `general_fit`.
     fn full_window_fits(&mut self, xs: &[usize], y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         let (wu, r) = (self.wu, self.r as i64);
         let full = [-r, r, -r, r];
