@@ -139,6 +139,17 @@ struct PixelFit {
 
 const NAN_FIT: PixelFit = PixelFit { plane: [f32::NAN; 3], grad: [f32::NAN; 2], hess: [f32::NAN; 3] };
 
+impl PixelFit {
+    /// Stores the fit at column `x` of the rows (the derivatives only for [`Fit::Quadratic`]).
+    fn store(self, fit: Fit, x: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
+        plane[x] = self.plane;
+        if fit == Fit::Quadratic {
+            let [ix, iy, ixx, ixy, iyy] = deriv;
+            ([ix[x], iy[x]], [ixx[x], ixy[x], iyy[x]]) = (self.grad, self.hess);
+        }
+    }
+}
+
 impl<'a> RowFitter<'a> {
     /// Prepares the fits of `window_px × window_px` windows over `src` (`wu × hu`, row-major).
     pub(crate) fn new(src: &'a [f32], wu: usize, hu: usize, window_px: u32, path: Path, fit: Fit) -> Self {
@@ -340,14 +351,14 @@ impl<'a> RowFitter<'a> {
         }
         for x in (0..fast_lo).chain(fast_hi..wu) {
             let f = self.general_fit(x, y);
-            self.put(x, f, plane, deriv);
+            f.store(self.fit, x, plane, deriv);
         }
         // Windows with no data (or overflowing sums) left a non-finite check value: refit them.
         let non_finite = |v: &f32| u32::from(v.to_bits() & 0x7f80_0000 == 0x7f80_0000);
-        if fast_row && fast_hi > fast_lo && self.chk.iter().fold(0, |bad, v| bad | non_finite(v)) != 0 {
+        if fast_row && fast_hi > fast_lo {
             let zrow = &self.src[y * wu + fast_lo..y * wu + fast_hi];
             let chk = &self.chk[..fast_hi - fast_lo];
-            let quad = self.fit == Fit::Quadratic;
+            let fit = self.fit;
             let mut holed = std::mem::take(&mut self.holed);
             holed.clear();
             // In blocks of 16 pixels: a block without a non-finite check value (most) is passed over at once.
@@ -361,10 +372,7 @@ impl<'a> RowFitter<'a> {
                             holed.push(x);
                         } else {
                             // No-data pixels (most of these in frames with large holes) need no fit.
-                            plane[x] = NAN_FIT.plane;
-                            if quad {
-                                deriv.iter_mut().for_each(|d| d[x] = f32::NAN);
-                            }
+                            NAN_FIT.store(fit, x, plane, deriv);
                         }
                     }
                 }
@@ -373,15 +381,6 @@ impl<'a> RowFitter<'a> {
                 self.full_window_fits(xs, y, plane, deriv);
             }
             self.holed = holed;
-        }
-    }
-
-    /// Stores one pixel's fit at column `x`.
-    fn put(&self, x: usize, f: PixelFit, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
-        plane[x] = f.plane;
-        if self.fit == Fit::Quadratic {
-            let [ix, iy, ixx, ixy, iyy] = deriv;
-            ([ix[x], iy[x]], [ixx[x], ixy[x], iyy[x]]) = (f.grad, f.hess);
         }
     }
 
@@ -571,10 +570,10 @@ impl<'a> RowFitter<'a> {
     fn full_window_fits(&mut self, xs: &[usize], y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         let (wu, r) = (self.wu, self.r as i64);
         let full = [-r, r, -r, r];
-        if self.fit != Fit::Quadratic || xs.len() == 1 {
+        if self.fit != Fit::Quadratic {
             for &x in xs {
                 let f = self.general_fit(x, y);
-                self.put(x, f, plane, deriv);
+                f.store(self.fit, x, plane, deriv);
             }
             return;
         }
@@ -595,7 +594,7 @@ impl<'a> RowFitter<'a> {
                 && r <= MAX_SHAPE_R
                 && let Some(f) = self.shape_fit(x, y, zc, full)
             {
-                self.put(x, f, plane, deriv);
+                f.store(self.fit, x, plane, deriv);
                 continue;
             }
             let mut t = 0;
@@ -617,7 +616,7 @@ impl<'a> RowFitter<'a> {
             if let Some((x, zc, count)) = lane {
                 let quad = (count >= 6 && ok[l]).then(|| std::array::from_fn(|i| rhs[i][l]));
                 let f = self.pixel_fit(x, y, zc, planes[l], quad);
-                self.put(x, f, plane, deriv);
+                f.store(self.fit, x, plane, deriv);
             }
         }
     }
@@ -802,13 +801,13 @@ impl<'a> RowFitter<'a> {
             let p = [acc[i], acc[m + i], acc[2 * m + i]];
             let q: [f64; 6] = std::array::from_fn(|j| acc[(3 + j) * m + i]);
             let f = self.pixel_fit(x, y, f64::from(zc[i]), has_plane.then_some(p), has_quad.then_some(q));
-            self.put(x, f, plane, deriv);
+            f.store(self.fit, x, plane, deriv);
         }
         if refit {
             for x in r..wu - r {
                 if bad[x - r..=x + r].iter().any(|&b| b) {
                     let f = self.general_fit(x, y);
-                    self.put(x, f, plane, deriv);
+                    f.store(self.fit, x, plane, deriv);
                 }
             }
         }
