@@ -20,6 +20,7 @@ const OBJECTIVES: &[(&str, &str)] = &[
     ),
     ("boundary_f", "mean one-to-one boundary F (τ = 2 px) of the final edge map"),
     ("paper_precision", "mean paper precision of the final edge map against C1 (the paper's protocol)"),
+    ("c2_paper_precision", "mean paper precision of C2 against C1 (the paper's Table I protocol)"),
 ];
 
 /// The tuning file: a base config, an objective and a grid of dotted keys.
@@ -70,6 +71,7 @@ struct Sample {
     rg_correct: f64,
     f: f64,
     c2_f: f64,
+    c2_pp: f64,
     pp: f64,
 }
 
@@ -79,6 +81,7 @@ fn objective(name: &str, s: &Sample) -> f64 {
         "hoover_correct" => (s.correct - 0.5 * (s.over + s.under)) / s.gt_regions.max(1.0),
         "boundary_f" => s.f,
         "paper_precision" => s.pp,
+        "c2_paper_precision" => s.c2_pp,
         _ => unreachable!("objective names are checked when the grid is read"),
     }
 }
@@ -184,6 +187,8 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
                 rg_correct: regions.1,
                 f,
                 c2_f: canny.1,
+                c2_pp: eval::paper_precision(&canny.0.edges, &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX)
+                    .unwrap_or(0.0),
                 pp,
             }
         })
@@ -395,6 +400,7 @@ fn mean_sample(rows: &[&Sample]) -> Sample {
         m.rg_correct += s.rg_correct / n;
         m.f += s.f / n;
         m.c2_f += s.c2_f / n;
+        m.c2_pp += s.c2_pp / n;
         m.pp += s.pp / n;
     }
     m
