@@ -3,6 +3,7 @@
 use crate::pipeline::Output;
 use eval::boundary::Prf;
 use eval::hoover::HooverScore;
+use eval::jin::JinScore;
 use rangeimage::{EdgeMap, LabelImage, Region};
 use serde::Serialize;
 
@@ -45,6 +46,10 @@ pub struct ImageScores {
     pub hoover_regiongrow: HooverScore,
     /// Hoover at T = 0.8 for the final segmentation.
     pub hoover_final: HooverScore,
+    /// Jin et al.'s one-sided detection rule (≥ 80 % of a GT plane in one region), region growing alone.
+    pub jin_regiongrow: JinScore,
+    /// Jin et al.'s one-sided detection rule for the final segmentation.
+    pub jin_final: JinScore,
     /// Correct detections of the final segmentation over `hoover_curve_ts()`.
     pub curve_correct: Vec<u32>,
     /// Correct detections of region growing alone over `hoover_curve_ts()`.
@@ -86,6 +91,8 @@ pub fn score_image(
         relaxed: score_edges(out.fin.edges(), c1, gt),
         hoover_regiongrow: hoover(gt, &out.regions.labels, &out.regions.regions, gt_angles),
         hoover_final: hoover(gt, &out.fin.labels, &out.fin.final_regions, gt_angles),
+        jin_regiongrow: jin(gt, &out.regions.labels),
+        jin_final: jin(gt, &out.fin.labels),
         curve_correct: correct(&out.fin.labels),
         curve_correct_regiongrow: correct(&out.regions.labels),
     }
@@ -99,4 +106,9 @@ pub fn hoover(
     gt_angles: &[(u32, u32, f64)],
 ) -> HooverScore {
     eval::hoover::compare(gt, labels, HOOVER_T, Some(gt_angles), Some(&normals_of(regions)))
+}
+
+/// Jin et al.'s one-sided detection counts of a segmentation at their threshold (0.8).
+pub fn jin(gt: &LabelImage, labels: &LabelImage) -> JinScore {
+    eval::jin::score(gt, labels, eval::Convention::Auto, eval::jin::THRESHOLD)
 }

@@ -225,6 +225,16 @@ fn render_text(s: &eval::Scores, files: &Files, convention: eval::Convention, to
         };
         let _ = writeln!(out, "angle error    {angle}");
     }
+    if let Some(j) = &s.jin {
+        let _ = writeln!(
+            out,
+            "jin et al.     {} of {} GT planes covered ≥ {:.0} % by one region ({:.3})",
+            j.detected,
+            j.gt_regions,
+            100.0 * j.threshold,
+            j.rate
+        );
+    }
     if let Some(curve) = &s.hoover_curve {
         for h in curve {
             let _ = writeln!(out, "  curve        {}", fmt_hoover(h));
@@ -304,8 +314,10 @@ mod tests {
         // The 2-px GT band (32 px) thins to column 11, rows 1..=15; the MS boundary's thinned
         // line (column 12) lies 1 px beside it.
         assert_eq!((b.matched.n_gt, b.matched.n_gt_matched), (15, 15));
+        assert_eq!(s.jin.as_ref().map(|j| (j.detected, j.gt_regions)), Some((2, 2)));
         let json = serde_json::to_value(Report { scores: &s, seg_convention: conv, files: &files }).unwrap();
         assert_eq!(json["hoover"]["correct"], 2);
+        assert_eq!(json["jin"]["detected"], 2);
         assert!(json["paper_precision"].is_null());
         assert!(render_text(&s, &files, conv, 2.0).contains("n/a (needs --edges and --reference)"));
 

@@ -7,6 +7,8 @@
 //!   don't-care zone around unlabelled GT.
 //! - [`hoover`]: Hoover et al. (1996) correct / over / under / missed / noise counts at a
 //!   tolerance T, the curve over T, and the normal-angle error of correctly detected pairs.
+//! - [`jin`]: Jin et al. (2017)'s one-sided plane detection rule (one machine region covering
+//!   ≥ 80 % of a GT plane), as their evaluation code computes it.
 //! - [`score`]: everything the given inputs allow, as one serialisable [`Scores`].
 //!
 //! Label conventions: GT images follow ABW (regions ≥ 10, 0..=9 unlabelled); machine
@@ -15,12 +17,14 @@
 pub mod boundary;
 pub mod distance;
 pub mod hoover;
+pub mod jin;
 #[cfg(test)]
 mod testing;
 pub mod thin;
 
 pub use boundary::Prf;
 pub use hoover::{Convention, HooverScore};
+pub use jin::JinScore;
 
 use rangeimage::{EdgeMap, LabelImage};
 
@@ -142,6 +146,8 @@ pub struct Scores {
     pub hoover: Option<HooverScore>,
     /// Hoover scores over [`hoover::CURVE_TS`] (needs a segmentation and `Params::hoover_curve`).
     pub hoover_curve: Option<Vec<HooverScore>>,
+    /// Jin et al.'s one-sided detection rule at [`jin::THRESHOLD`] (needs a segmentation).
+    pub jin: Option<JinScore>,
     /// Boundary P/R/F (needs an edge map or a segmentation).
     pub boundary: Option<BoundaryScores>,
     /// The paper's precision (needs an edge map and a reference; `None` if nothing is detected).
@@ -175,6 +181,7 @@ pub fn score(inputs: &Inputs<'_>, params: &Params) -> Scores {
         }
         None => (None, None),
     };
+    let jin = inputs.seg.map(|seg| jin::score(gt, seg, params.seg_convention, jin::THRESHOLD));
     let detected = match (inputs.edges, inputs.seg) {
         (Some(e), _) => Some((e.clone(), BoundarySource::Edges)),
         (None, Some(seg)) => {
@@ -197,7 +204,7 @@ pub fn score(inputs: &Inputs<'_>, params: &Params) -> Scores {
         (Some(e), Some(r)) => paper_precision(e, r, params.tolerance_px),
         _ => None,
     };
-    Scores { hoover, hoover_curve, boundary, paper_precision }
+    Scores { hoover, hoover_curve, jin, boundary, paper_precision }
 }
 
 #[cfg(test)]
@@ -242,12 +249,14 @@ mod tests {
         );
         let h = s.hoover.as_ref().unwrap();
         assert_eq!((h.correct, h.gt_regions), (2, 2));
+        assert_eq!(s.jin.as_ref().map(|j| (j.detected, j.gt_regions)), Some((2, 2)));
         assert_eq!(s.hoover_curve.as_ref().unwrap().len(), hoover::CURVE_TS.len());
         let b = s.boundary.as_ref().unwrap();
         assert_eq!(b.boundary_source, BoundarySource::Segmentation);
         assert_eq!((b.matched.f, b.simple.f), (1.0, 1.0));
         let json = serde_json::to_value(&s).unwrap();
         assert_eq!(json["hoover"]["correct"], 2);
+        assert_eq!(json["jin"]["rate"], 1.0);
         assert_eq!(json["boundary"]["boundary_source"], "segmentation");
         assert_eq!(json["boundary"]["matched"]["precision"], 1.0);
         assert!(json["paper_precision"].is_null());
@@ -305,7 +314,8 @@ mod tests {
                 let params = Params { hoover_curve: true, ..Params::default() };
                 let a = score(&Inputs { seg: Some(&seg), ..Inputs::new(&gt) }, &params);
                 let b = score(&Inputs { seg: Some(&seg2), ..Inputs::new(&gt) }, &params);
-                prop_assert_eq!(a, b);
+                // Except Jin et al.'s rule, which breaks ties between machine regions by label.
+                prop_assert_eq!(Scores { jin: None, ..a }, Scores { jin: None, ..b });
             }
         }
     }
