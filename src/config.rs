@@ -57,12 +57,13 @@ pub struct Config {
 #[non_exhaustive]
 pub enum ConfigError {
     /// The file could not be read.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The configuration file.
         path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
+        /// The underlying error (its text is part of the message, so it is not chained as a source:
+        /// `{:#}` would print it twice).
+        error: std::io::Error,
     },
     /// The file is not valid TOML or has unknown keys or wrong types.
     #[error("{}: {message}", path.display())]
@@ -118,7 +119,7 @@ impl Config {
     /// Reads and validates a TOML configuration file.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let text =
-            std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.into(), source })?;
+            std::fs::read_to_string(path).map_err(|error| ConfigError::Io { path: path.into(), error })?;
         Self::from_toml(&text, path)
     }
 

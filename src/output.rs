@@ -5,14 +5,20 @@ use rangeimage::{LabelImage, Region};
 use rangeio::Frame;
 use std::path::Path;
 
-/// Writes `labels` as an ABW `.ms-seg` (renumbered from 10 as the format needs) and the regions' normals as a
-/// `.ms-nor` under the same labels; returns the `(label, written label)` pairs.
+/// Writes `labels` as an ABW `.ms-seg` (renumbered from 10 as the format needs), the regions' normals as a
+/// `.ms-nor` under the same labels, and every label unchanged as a 16-bit gray PNG beside the `.ms-seg`
+/// (`NAME.labels.png`, 0 = none), which keeps the regions the `.ms-seg`'s 246-region cap drops;
+/// returns the `(label, written label)` pairs of the `.ms-seg`.
+///
+/// Regions lost to the cap are reported with `tracing::warn!` (see [`ms_seg_cap_loss`]).
 pub fn write_segmentation(
     seg_path: &Path,
     nor_path: &Path,
     labels: &LabelImage,
     regions: &[Region],
 ) -> Result<Vec<(u32, u8)>, rangeio::WriteError> {
+    let labels_path = labels_png_path(seg_path);
+    rangeio::png::write_label16_png(&labels_path, labels)?;
     let mapping = rangeio::abw::write_labels(seg_path, labels)?;
     let normals: Vec<(u32, [f32; 3])> = mapping
         .iter()
@@ -20,11 +26,41 @@ pub fn write_segmentation(
         .filter_map(|&(old, new)| regions.iter().find(|r| r.label == old).map(|r| (u32::from(new), r.normal)))
         .collect();
     rangeio::abw::write_normals(nor_path, &normals)?;
+    let (lost, lost_px) = ms_seg_cap_loss(labels, &mapping);
+    if lost > 0 {
+        tracing::warn!(
+            "{}: the .ms-seg format holds at most 246 regions: {lost} of {} regions ({lost_px} px) are 0 in it; \
+             {} has them all",
+            seg_path.display(),
+            lost + mapping.len(),
+            labels_path.display()
+        );
+    }
     Ok(mapping)
 }
 
-/// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png` and `STEM.regions.png`
-/// into `dir`, each atomically, and returns a JSON summary (counts, energies) for `STEM.json`.
+/// `NAME.labels.png` beside `NAME.ms-seg`.
+pub fn labels_png_path(seg_path: &Path) -> std::path::PathBuf {
+    let stem = seg_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    seg_path.with_file_name(format!("{stem}.labels.png"))
+}
+
+/// Regions (and their pixels) of `labels` that the `.ms-seg` written with `mapping` sets to 0.
+pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u64) {
+    let kept: std::collections::HashSet<u32> = mapping.iter().map(|&(l, _)| l).collect();
+    let mut lost = std::collections::HashSet::new();
+    let mut px = 0;
+    for &l in labels.as_slice() {
+        if l != 0 && !kept.contains(&l) {
+            lost.insert(l);
+            px += 1;
+        }
+    }
+    (lost.len(), px)
+}
+
+/// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.labels.png`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png` and
+/// `STEM.regions.png` into `dir`, each atomically, and returns a JSON summary (counts, energies) for `STEM.json`.
 pub fn write_outputs(
     dir: &Path,
     stem: &str,
@@ -40,6 +76,7 @@ pub fn write_outputs(
     rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;
     rangeio::png::write_label_png(&path("regions.png"), &out.fin.labels)?;
 
+    let (lost, lost_px) = ms_seg_cap_loss(&out.fin.labels, &mapping);
     let count = |e: &rangeimage::EdgeMap| e.as_slice().iter().filter(|&&b| b).count();
     let info = &out.fin.relax_info;
     Ok(serde_json::json!({
@@ -49,6 +86,8 @@ pub fn write_outputs(
         "regions_grown": out.regions.regions.len(),
         "regions_final": out.fin.final_regions.len(),
         "regions_written": mapping.len(),
+        "regions_dropped_by_ms_seg_cap": lost,
+        "px_dropped_by_ms_seg_cap": lost_px,
         "c1_px_initial": count(&out.regions.c1),
         "c2_px_initial": count(&out.canny.edges),
         "c1_px": count(&out.fin.relaxed.c1),

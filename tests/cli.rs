@@ -29,7 +29,7 @@ fn score_of_written_outputs_equals_in_memory_scores() {
     let out_dir = dir.path().join("out");
     let o = rangeseg(&["segment".as_ref(), range_path.as_os_str(), "-o".as_ref(), out_dir.as_os_str()]);
     assert!(o.status.success(), "segment failed: {}", String::from_utf8_lossy(&o.stderr));
-    for ext in ["ms-seg", "ms-nor", "edges.png", "c1.png", "c2.png", "regions.png", "json"] {
+    for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png", "json"] {
         assert!(out_dir.join(format!("abw.train.0.{ext}")).is_file(), "missing output .{ext}");
     }
 
@@ -92,4 +92,184 @@ fn segment_reports_a_bad_file_and_finishes_the_rest() {
     assert!(stderr.contains("broken.range"), "{stderr}");
     assert!(out_dir.join("abw.train.1.ms-seg").is_file());
     assert!(!Path::new(&out_dir.join("broken.ms-seg")).exists());
+}
+
+fn stderr_of(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Writes a small benchmark scene as an ABW range file at `path`.
+fn write_scene(path: &Path, index: u32) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    rangeio::abw::write_range(path, &crate::range_of(&crate::small_scene(index))).unwrap();
+}
+
+#[test]
+fn inputs_with_one_stem_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("d1/x.range"), dir.path().join("d2/x.range"));
+    write_scene(&a, 1);
+    write_scene(&b, 2);
+    let out = dir.path().join("o");
+    let o = rangeseg(&["segment".as_ref(), a.as_os_str(), b.as_os_str(), "-o".as_ref(), out.as_os_str()]);
+    assert!(!o.status.success());
+    let e = stderr_of(&o);
+    assert!(e.contains(&*a.to_string_lossy()) && e.contains(&*b.to_string_lossy()), "{e}");
+    assert!(!out.exists(), "nothing written");
+}
+
+#[test]
+fn segment_skips_its_own_outputs_when_run_twice_on_a_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    write_scene(&dir.path().join("abw.train.1.range"), 1);
+    for _ in 0..2 {
+        let o =
+            rangeseg(&["segment".as_ref(), dir.path().as_os_str(), "-o".as_ref(), dir.path().as_os_str()]);
+        assert!(o.status.success(), "{}", stderr_of(&o));
+    }
+    let mut jsons: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".json"))
+        .collect();
+    jsons.sort();
+    assert_eq!(jsons, ["abw.train.1.json"]);
+}
+
+#[test]
+fn output_paths_are_checked_before_the_pipeline() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("abw.train.1.range");
+    write_scene(&input, 1);
+    // `-o FILE`: not a directory.
+    let file = dir.path().join("plain-file");
+    std::fs::write(&file, b"x").unwrap();
+    let o = rangeseg(&["segment".as_ref(), input.as_os_str(), "-o".as_ref(), file.as_os_str()]);
+    assert!(!o.status.success());
+    let e = stderr_of(&o);
+    assert!(e.contains("plain-file: not a directory"), "{e}");
+    // An output folder nobody can write into (even root) is refused before reading a bad input.
+    if Path::new("/proc/1").is_dir() {
+        let bad = dir.path().join("broken.range");
+        std::fs::write(&bad, b"not a range file").unwrap();
+        let o = rangeseg(&["segment".as_ref(), bad.as_os_str(), "-o".as_ref(), "/proc/1".as_ref()]);
+        let e = stderr_of(&o);
+        assert!(!o.status.success() && e.contains("/proc/1: cannot write into the output folder"), "{e}");
+        assert!(!e.contains("broken.range"), "the output folder is checked first: {e}");
+    }
+    // `render` and `edges` create the folder of their output file, like `segment`.
+    for cmd in ["render", "edges"] {
+        let out = dir.path().join(format!("new/{cmd}/out.png"));
+        let o = rangeseg(&[cmd.as_ref(), input.as_os_str(), "-o".as_ref(), out.as_os_str()]);
+        assert!(o.status.success() && out.is_file(), "{cmd}: {}", stderr_of(&o));
+    }
+    // A configuration path that is a folder is reported once.
+    let o = rangeseg(&[
+        "segment".as_ref(),
+        input.as_os_str(),
+        "-o".as_ref(),
+        dir.path().join("o").as_os_str(),
+        "--config".as_ref(),
+        dir.path().as_os_str(),
+    ]);
+    let e = stderr_of(&o);
+    assert!(!o.status.success());
+    assert_eq!(e.matches("directory").count(), 1, "{e}");
+}
+
+#[test]
+fn pixel_cap_is_a_clear_error_and_raisable() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("abw.train.1.range");
+    write_scene(&input, 1);
+    let o = rangeseg(&["info".as_ref(), input.as_os_str(), "--max-pixels".as_ref(), "1000".as_ref()]);
+    let e = stderr_of(&o);
+    assert!(!o.status.success() && e.contains("abw.train.1.range") && e.contains("--max-pixels"), "{e}");
+    let o = rangeseg(&["info".as_ref(), input.as_os_str(), "--max-pixels".as_ref(), "262144".as_ref()]);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+}
+
+/// A 512² checkerboard of 30-px cells, each a plane of its own tilt: more regions than `.ms-seg` holds.
+fn checkerboard() -> rangeimage::Grid<u16> {
+    rangeimage::Grid::from_fn(512, 512, |x, y| {
+        let (i, j) = (x / 30, y / 30);
+        let (cx, cy) = (i as f64 * 30.0 + 14.5, j as f64 * 30.0 + 14.5);
+        let a = [-2.0, 1.5, -1.0, 2.5][((i + 2 * j) % 4) as usize];
+        let b = [1.0, -2.0, 2.0, -1.5][((3 * i + j) % 4) as usize];
+        (3000.0 + 40.0 * f64::from((i + j) % 3) + a * (f64::from(x) - cx) + b * (f64::from(y) - cy)) as u16
+    })
+}
+
+#[test]
+fn regions_beyond_the_ms_seg_cap_are_reported_and_kept_in_the_labels_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("board.pgm");
+    rangeio::pgm::write_pgm(&input, &checkerboard()).unwrap();
+    let out = dir.path().join("o");
+    let o = rangeseg(&["segment".as_ref(), input.as_os_str(), "-o".as_ref(), out.as_os_str()]);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("board.json")).unwrap()).unwrap();
+    let final_regions = json["regions_final"].as_u64().unwrap();
+    assert!(final_regions > 246, "the scene must exceed the cap: {final_regions} regions");
+    let dropped = json["regions_dropped_by_ms_seg_cap"].as_u64().unwrap();
+    assert_eq!(dropped, final_regions - 246);
+    assert!(json["px_dropped_by_ms_seg_cap"].as_u64().unwrap() > 0);
+    let e = stderr_of(&o);
+    assert!(e.contains("246") && e.contains("board.labels.png"), "a warning on stderr: {e}");
+    // The 16-bit labels PNG keeps every region.
+    let img = image::open(out.join("board.labels.png")).unwrap().into_luma16();
+    let labels: std::collections::BTreeSet<u16> = img.pixels().map(|p| p.0[0]).filter(|&l| l != 0).collect();
+    assert_eq!(labels.len() as u64, final_regions);
+}
+
+#[test]
+fn interrupt_leaves_no_temporary_files_and_json_marks_complete_sets() {
+    if !Path::new("/bin/kill").exists() && !Path::new("/usr/bin/kill").exists() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let inputs = dir.path().join("in");
+    for k in 0..40 {
+        write_scene(&inputs.join(format!("img{k:02}.range")), k % 10);
+    }
+    let out = dir.path().join("o");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rangeseg"))
+        .args([
+            "segment".as_ref(),
+            inputs.as_os_str(),
+            "-o".as_ref(),
+            out.as_os_str(),
+            "-j".as_ref(),
+            "2".as_ref(),
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Interrupt once the first image is complete (or when the run has ended on its own).
+    let json_count = || {
+        std::fs::read_dir(&out).map_or(0, |d| {
+            d.filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().ends_with(".json"))).count()
+        })
+    };
+    while json_count() == 0 && child.try_wait().unwrap().is_none() {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let ended_alone = child.try_wait().unwrap().is_some();
+    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    let o = child.wait_with_output().unwrap();
+    let names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.contains(".tmp.")), "temporary files left: {names:?}");
+    if !ended_alone {
+        assert_eq!(o.status.code(), Some(130), "exit 128 + SIGINT: {}", stderr_of(&o));
+    }
+    for json in names.iter().filter(|n| n.ends_with(".json")) {
+        let stem = json.trim_end_matches(".json");
+        for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png"] {
+            assert!(names.contains(&format!("{stem}.{ext}")), "{stem} has a JSON but no .{ext}");
+        }
+    }
 }

@@ -26,6 +26,7 @@ pub(crate) struct Args {
 /// Runs `rangeseg edges`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
+    super::prepare_out_file(&args.output)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let edges = if args.raw {
         vcanny::detect_raw(&frame.range, &cfg.raw_canny)

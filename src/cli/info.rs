@@ -22,6 +22,9 @@ pub(crate) struct ReadArgs {
     /// Samples are raw NYU/Kinect disparity: depth_m = 351.3 / (1092.5 − raw), 2047 = no data.
     #[arg(long)]
     pub(crate) nyu_disparity: bool,
+    /// Refuse images of more pixels than this (width × height, read from the header before decoding).
+    #[arg(long, value_name = "N", default_value_t = rangeio::DEFAULT_MAX_PIXELS)]
+    pub(crate) max_pixels: u64,
 }
 
 impl ReadArgs {
@@ -32,6 +35,7 @@ impl ReadArgs {
             camera: self.camera,
             pgm_little_endian: self.pgm_little_endian,
             nyu_disparity_to_depth: self.nyu_disparity,
+            max_pixels: self.max_pixels,
         }
     }
 }

@@ -8,7 +8,9 @@ mod render;
 mod score;
 mod segment;
 
+use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
+use std::path::Path;
 use std::process::ExitCode;
 
 /// Segment range images (depth images) into surfaces and edges.
@@ -47,5 +49,33 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Regions(a) => regions::run(a),
         Command::Segment(a) => segment::run(a),
         Command::Config(a) => config::run(a),
+    }
+}
+
+/// Makes sure `dir` is a folder we can write into (created if missing), before any work is done.
+pub(crate) fn prepare_out_dir(dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        bail!("{}: not a directory (the output of this command is a folder)", dir.display());
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the output folder", dir.display()))?;
+    let probe = dir.join(format!(".rangeseg-probe.{}", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .with_context(|| format!("{}: cannot write into the output folder", dir.display()))?;
+    std::fs::remove_file(&probe).with_context(|| format!("{}: cannot remove", probe.display()))?;
+    Ok(())
+}
+
+/// Makes sure the output file `path` can be written: its folder is created if missing and must be writable.
+pub(crate) fn prepare_out_file(path: &Path) -> anyhow::Result<()> {
+    if path.is_dir() {
+        bail!("{}: is a directory (expected an output file name)", path.display());
+    }
+    match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => prepare_out_dir(parent),
+        _ => prepare_out_dir(Path::new(".")),
     }
 }

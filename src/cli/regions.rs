@@ -1,6 +1,5 @@
 //! `rangeseg regions`: multi-seed region growing and its borders C1.
 
-use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,8 +10,8 @@ pub(crate) struct Args {
     /// Range file: ABW Sun rasterfile, PGM, PNG, TIFF or organized PCD.
     #[arg(value_name = "FILE")]
     file: PathBuf,
-    /// Output directory (created if missing); writes NAME.ms-seg, NAME.ms-nor, NAME.c1.png and
-    /// NAME.regions.png, NAME being the file name without its last extension.
+    /// Output directory (created if missing); writes NAME.ms-seg, NAME.ms-nor, NAME.labels.png (16-bit,
+    /// every region), NAME.c1.png and NAME.regions.png, NAME being the file name without its last extension.
     #[arg(short, long, value_name = "OUTDIR")]
     out: PathBuf,
     /// Configuration file (see `configs/`; this command uses `seed`, `[features]` and `[regiongrow]`).
@@ -29,11 +28,11 @@ pub(crate) struct Args {
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
     let seed = args.seed.unwrap_or(cfg.seed);
+    super::prepare_out_dir(&args.out)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let feats = features::compute(&frame.range, &cfg.features);
     let (seg, info) = regiongrow::grow(&frame.range, &feats, &frame.camera, &cfg.regiongrow, seed);
 
-    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
     let name =
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     let path = |ext: &str| args.out.join(format!("{name}.{ext}"));

@@ -23,6 +23,7 @@ pub(crate) struct Args {
 
 /// Runs `rangeseg render`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
+    super::prepare_out_file(&args.output)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     if args.shade {
         rangeio::png::write_gray_png(&args.output, &features::shade(&frame.range))?;

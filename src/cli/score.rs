@@ -46,7 +46,7 @@ pub(crate) struct Args {
     /// Reference edge PNG for the paper's precision (Eq. 7), e.g. C1; needs --edges.
     #[arg(long, value_name = "REF.png")]
     reference: Option<PathBuf>,
-    /// Edge matching tolerance in pixels (Euclidean, inclusive).
+    /// Edge matching tolerance in pixels (Euclidean, inclusive), at most the image diagonal.
     #[arg(long, default_value_t = 2.0)]
     tolerance_px: f64,
     /// Hoover tolerance T, in (0.5, 1].
@@ -112,6 +112,22 @@ fn check_size<T, U>(
     Ok(())
 }
 
+/// Refuses a matching tolerance τ larger than the image diagonal: no two pixels are farther apart, so a
+/// larger value means nothing (and the one-to-one matching's candidate lists grow with τ²).
+fn check_tolerance<T>(tolerance_px: f64, gt_path: &Path, gt: &rangeimage::Grid<T>) -> anyhow::Result<()> {
+    let diagonal = f64::from(gt.width()).hypot(f64::from(gt.height()));
+    if tolerance_px > diagonal {
+        bail!(
+            "--tolerance-px {tolerance_px} is larger than the diagonal of {} ({}×{}: {diagonal:.1} px); \
+             use a value up to the diagonal",
+            gt_path.display(),
+            gt.width(),
+            gt.height()
+        );
+    }
+    Ok(())
+}
+
 /// Runs `rangeseg score`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let (scores, files, convention) = compute(&args)?;
@@ -133,6 +149,12 @@ fn compute(args: &Args) -> anyhow::Result<(eval::Scores, Files, eval::Convention
         seg_convention: args.seg_convention.into(),
         hoover_curve: args.curve,
     };
+    if !(args.tolerance_px.is_finite() && args.tolerance_px >= 0.0) {
+        bail!("--tolerance-px must be a finite number ≥ 0, got {}", args.tolerance_px);
+    }
+    if !(args.hoover_t > 0.5 && args.hoover_t <= 1.0) {
+        bail!("--hoover-t must be in (0.5, 1], got {}", args.hoover_t);
+    }
     if let Err(e) = params.validate() {
         bail!("invalid option: {e}");
     }
@@ -140,6 +162,7 @@ fn compute(args: &Args) -> anyhow::Result<(eval::Scores, Files, eval::Convention
         bail!("--reference needs --edges (the paper's precision scores an edge map against a reference)");
     }
     let gt = rangeio::abw::read_labels(&args.gt, true)?;
+    check_tolerance(args.tolerance_px, &args.gt, &gt)?;
     let seg = rangeio::abw::read_labels(&args.seg, false)?;
     check_size("segmentation", &args.seg, &seg, &args.gt, &gt)?;
     let edges = match &args.edges {
@@ -332,8 +355,79 @@ mod tests {
         assert!(err.contains("small.png") && err.contains("3×3"), "{err}");
         let missing = Args { seg: dir.join("none.ms-seg"), ..args(&dir) };
         assert!(format!("{:#}", compute(&missing).unwrap_err()).contains("none.ms-seg"));
+        let huge_tau = Args { tolerance_px: 1e9, ..args(&dir) };
+        let err = format!("{:#}", compute(&huge_tau).unwrap_err());
+        assert!(err.contains("--tolerance-px 1000000000") && err.contains("a.gt-seg"), "{err}");
+        let diagonal = Args { tolerance_px: 24f64.hypot(16.0), ..args(&dir) };
+        assert!(compute(&diagonal).is_ok(), "τ = the diagonal is allowed");
         let bad_t = Args { hoover_t: 0.3, ..args(&dir) };
-        assert!(format!("{:#}", compute(&bad_t).unwrap_err()).contains("hoover_t"));
+        assert!(format!("{:#}", compute(&bad_t).unwrap_err()).contains("--hoover-t"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Numbers the fuzz draws the numeric options from: ordinary, boundary and absurd values.
+    fn numbers() -> impl proptest::strategy::Strategy<Value = f64> {
+        use proptest::prelude::*;
+        prop_oneof![
+            -3.0f64..40.0,
+            0.5f64..1.0,
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(f64::NEG_INFINITY),
+            Just(1e9),
+            Just(f64::MAX),
+            Just(-0.0),
+            Just(0.5),
+            Just(1.0),
+            any::<f64>(),
+        ]
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config {
+            cases: 64,
+            rng_seed: proptest::test_runner::RngSeed::Fixed(16),
+            failure_persistence: None,
+            ..proptest::test_runner::Config::default()
+        })]
+
+        /// `score` on mutated input files and absurd numeric options: never a panic, and every error
+        /// names the file or the option at fault.
+        #[test]
+        fn score_fuzz_never_panics_and_names_the_culprit(
+            tolerance_px in numbers(),
+            hoover_t in numbers(),
+            which in 0usize..4,
+            edits in proptest::collection::vec((proptest::prelude::any::<proptest::sample::Index>(), proptest::prelude::any::<u8>()), 0..6),
+            cut in proptest::option::of(proptest::prelude::any::<proptest::sample::Index>()),
+            curve in proptest::prelude::any::<bool>(),
+        ) {
+            let dir = tempfile::tempdir().unwrap();
+            write_case(dir.path());
+            let file = ["a.gt-seg", "a.ms-seg", "e.png", "a.gt-ang"][which];
+            let path = dir.path().join(file);
+            let mut bytes = std::fs::read(&path).unwrap();
+            for (i, v) in &edits {
+                let i = i.index(bytes.len());
+                bytes[i] = *v;
+            }
+            if let Some(c) = cut {
+                bytes.truncate(c.index(bytes.len() + 1));
+            }
+            std::fs::write(&path, &bytes).unwrap();
+            let a = Args {
+                edges: Some(dir.path().join("e.png")),
+                reference: Some(dir.path().join("e.png")),
+                tolerance_px,
+                hoover_t,
+                curve,
+                ..args(dir.path())
+            };
+            if let Err(e) = compute(&a) {
+                let msg = format!("{e:#}");
+                let names_option = msg.contains("--tolerance-px") || msg.contains("--hoover-t");
+                proptest::prop_assert!(names_option || msg.contains(file), "{}", msg);
+            }
+        }
     }
 }

@@ -189,7 +189,9 @@ pub fn matched_masked(
         }
     }
     // Left side: detected pixels in raster order, each with its GT candidates nearest first.
-    let offsets = disk_offsets(r2);
+    // No two pixels are farther apart than the corners, so a larger τ changes nothing but the cost.
+    let corners2 = f64::from(w.saturating_sub(1)).powi(2) + f64::from(h.saturating_sub(1)).powi(2);
+    let offsets = disk_offsets(r2.min(corners2));
     let mut start = vec![0u32];
     let mut adj = Vec::new();
     for (x, y, &b) in d.enumerate() {
@@ -437,6 +439,19 @@ mod tests {
         assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (20, 9, 9, 9));
         assert_relative_eq!(m.precision, 0.45);
         assert_relative_eq!(m.recall, 1.0);
+    }
+
+    /// A τ beyond the image's extent gives the same result as the farthest pixel pair, at the same cost
+    /// (τ = 1e9 used to enumerate about 4·10¹⁸ offsets).
+    #[test]
+    fn huge_tolerance_is_clamped_to_the_image() {
+        let gt = two_regions(12, 10, 6);
+        let det = Grid::from_fn(12, 10, |x, y| x == 2 || (x + y) % 5 == 0);
+        let far = (11.0f64 * 11.0 + 9.0 * 9.0).sqrt();
+        let m = matched_masked(&det, &gt_boundaries(&gt), &Grid::new(12, 10, false), far);
+        for tau in [far + 0.5, 1e9, f64::MAX.sqrt()] {
+            assert_eq!(matched_masked(&det, &gt_boundaries(&gt), &Grid::new(12, 10, false), tau), m, "{tau}");
+        }
     }
 
     #[test]

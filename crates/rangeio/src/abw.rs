@@ -18,6 +18,15 @@ const HEADER_LEN: usize = 32;
 /// byte that ends each row of odd width. Types 0 (old), 1 (standard) and 3 (RGB, same layout at
 /// 8 bits) are read; type 2 (run-length encoded) and any depth other than 8 are refused.
 pub fn raster_from_bytes(bytes: &[u8], path: &Path) -> Result<Grid<u8>, ReadError> {
+    raster_from_bytes_limited(bytes, path, crate::DEFAULT_MAX_PIXELS)
+}
+
+/// [`raster_from_bytes`] refusing headers of more than `max_pixels` pixels.
+pub(crate) fn raster_from_bytes_limited(
+    bytes: &[u8],
+    path: &Path,
+    max_pixels: u64,
+) -> Result<Grid<u8>, ReadError> {
     let p = || path.to_path_buf();
     if bytes.len() < 4 {
         return Err(ReadError::Truncated {
@@ -52,7 +61,7 @@ pub fn raster_from_bytes(bytes: &[u8], path: &Path) -> Result<Grid<u8>, ReadErro
     };
     let (width, height, depth, length, kind, maptype, maplength) =
         (word(1), word(2), word(3), word(4), word(5), word(6), word(7));
-    let (w, h) = check_dims(path, width.into(), height.into())?;
+    let (w, h) = check_dims(path, width.into(), height.into(), max_pixels)?;
     if depth != 8 {
         return Err(ReadError::Unsupported {
             path: p(),
@@ -192,13 +201,13 @@ fn check_labels(raw: &Grid<u8>, path: &Path) -> Result<(), ReadError> {
 /// 0 stays 0. If every label is 0 or in `10..=255`, labels are written unchanged (the pairs map each
 /// label present to itself, ascending). Otherwise the 246 largest regions (ties: earlier first
 /// appearance) are renumbered from 10 in raster order of first appearance and the rest set to 0;
-/// the pairs are sorted by new label, and a warning says how many regions were dropped.
+/// the pairs are sorted by new label (a debug event says how many regions were dropped; callers report it).
 pub fn write_labels(path: &Path, labels: &LabelImage) -> Result<Vec<(u32, u8)>, WriteError> {
     let (raw, pairs) = labels_to_raw(labels);
     let present =
         labels.as_slice().iter().filter(|&&l| l != 0).collect::<std::collections::BTreeSet<_>>().len();
     if pairs.len() < present {
-        tracing::warn!(
+        tracing::debug!(
             path = %path.display(),
             dropped = present - pairs.len(),
             kept = pairs.len(),

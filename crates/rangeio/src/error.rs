@@ -58,6 +58,21 @@ pub enum ReadError {
         /// Height from the header.
         height: u64,
     },
+    /// The header announces more pixels than the reader's cap (`ReadOptions::max_pixels`).
+    #[error(
+        "{path}: image of {width}x{height} = {} pixels is over the limit of {max_pixels} pixels (raise it with --max-pixels)",
+        width * height
+    )]
+    TooManyPixels {
+        /// The file.
+        path: PathBuf,
+        /// Width from the header.
+        width: u64,
+        /// Height from the header.
+        height: u64,
+        /// The cap that was applied.
+        max_pixels: u64,
+    },
     /// A valid file of a kind this crate does not read (bit depth, compression, field layout …).
     #[error("{path}: unsupported {what}")]
     Unsupported {
@@ -130,6 +145,7 @@ impl ReadError {
             | ReadError::Truncated { path, .. }
             | ReadError::BadMagic { path, .. }
             | ReadError::Dimensions { path, .. }
+            | ReadError::TooManyPixels { path, .. }
             | ReadError::Unsupported { path, .. }
             | ReadError::Invalid { path, .. }
             | ReadError::Label { path, .. }

@@ -41,8 +41,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// The largest width or height any reader accepts; larger headers are refused before allocating.
 pub const MAX_SIDE: u32 = 32768;
 
+/// The default pixel cap of [`ReadOptions::max_pixels`] (and of the readers that take no options):
+/// 100 megapixels. The pipeline needs about 100 bytes per pixel at its peak, so this bounds one image
+/// to roughly 10 GB; raise it with `ReadOptions::max_pixels` (the CLI's `--max-pixels`).
+pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+
 /// How [`read`] interprets an input file.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ReadOptions {
     /// Metres per stored unit for PGM, PNG and TIFF samples; `None` uses the format's default
     /// (16-bit PNG 1/5000, 16-bit TIFF 1/1000, otherwise raw values).
@@ -54,6 +59,21 @@ pub struct ReadOptions {
     /// Treat 16-bit samples as raw NYU/Kinect disparity: `depth_m = 351.3 / (1092.5 − raw)`,
     /// raw 2047 (or any raw ≥ 1092) = no data. Overrides `depth_scale`.
     pub nyu_disparity_to_depth: bool,
+    /// The largest width × height accepted, checked from the header before any pixel is decoded
+    /// (default [`DEFAULT_MAX_PIXELS`]).
+    pub max_pixels: u64,
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        Self {
+            depth_scale: None,
+            camera: None,
+            pgm_little_endian: false,
+            nyu_disparity_to_depth: false,
+            max_pixels: DEFAULT_MAX_PIXELS,
+        }
+    }
 }
 
 /// The file format a [`Frame`] was read from.
@@ -179,7 +199,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
     let is_tiff = head.starts_with(b"II*\0") || head.starts_with(b"MM\0*");
     let is_pcd = pcd::looks_like_pcd(bytes);
     let mut frame = if is_sun || (head.len() < 4 && matches!(ext.as_str(), "range" | "ras")) {
-        let raw = abw::raster_from_bytes(bytes, path)?;
+        let raw = abw::raster_from_bytes_limited(bytes, path, opts.max_pixels)?;
         let camera = abw::camera_for_path(path).unwrap_or(Camera::ABW0);
         Frame {
             range: abw::raw_to_range(&raw),
@@ -189,12 +209,12 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
             bits_per_sample: 8,
         }
     } else if is_pgm || (!is_png && !is_tiff && !is_pcd && matches!(ext.as_str(), "pgm" | "pnm")) {
-        let img = pgm::pgm_from_bytes(bytes, path, opts.pgm_little_endian)?;
+        let img = pgm::pgm_from_bytes_limited(bytes, path, opts.pgm_little_endian, opts.max_pixels)?;
         let (range, units) = scale_samples(&img.samples, opts, None);
         sensor_frame(range, Format::Pgm, units, img.bits)
     } else if is_png || is_tiff || (!is_pcd && matches!(ext.as_str(), "png" | "tif" | "tiff")) {
         let format = if is_png || (!is_tiff && ext == "png") { Format::Png } else { Format::Tiff };
-        let (samples, bits) = raster::decode_gray(bytes, path, format)?;
+        let (samples, bits) = raster::decode_gray(bytes, path, format, opts.max_pixels)?;
         let default = match (format, bits) {
             (Format::Png, 16) => Some(1.0 / 5000.0),
             (Format::Tiff, 16) => Some(1.0 / 1000.0),
@@ -203,7 +223,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
         let (range, units) = scale_samples(&samples, opts, default);
         sensor_frame(range, format, units, bits)
     } else if is_pcd || ext == "pcd" {
-        let cloud = pcd::pcd_from_bytes(bytes, path)?;
+        let cloud = pcd::pcd_from_bytes_limited(bytes, path, opts.max_pixels)?;
         let camera = pcd::estimate_camera(&cloud);
         Frame {
             range: cloud.z,
@@ -298,18 +318,40 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
     std::fs::read(path).map_err(|error| ReadError::Io { path: path.to_path_buf(), error })
 }
 
-/// Checks header dimensions against [`MAX_SIDE`] and returns them as `usize`.
-pub(crate) fn check_dims(path: &Path, width: u64, height: u64) -> Result<(usize, usize), ReadError> {
+/// Checks header dimensions against [`MAX_SIDE`] and `max_pixels` and returns them as `usize`.
+pub(crate) fn check_dims(
+    path: &Path,
+    width: u64,
+    height: u64,
+    max_pixels: u64,
+) -> Result<(usize, usize), ReadError> {
     let max = u64::from(MAX_SIDE);
     if width == 0 || height == 0 || width > max || height > max {
         return Err(ReadError::Dimensions { path: path.to_path_buf(), width, height });
     }
+    if width * height > max_pixels {
+        return Err(ReadError::TooManyPixels { path: path.to_path_buf(), width, height, max_pixels });
+    }
     Ok((width as usize, height as usize))
+}
+
+/// Temporary files of [`write_atomic`] now being written, and whether [`abort_writes`] was called.
+struct InFlight {
+    tmps: Vec<PathBuf>,
+    aborted: bool,
+}
+
+static IN_FLIGHT: std::sync::Mutex<InFlight> =
+    std::sync::Mutex::new(InFlight { tmps: Vec::new(), aborted: false });
+
+fn in_flight() -> std::sync::MutexGuard<'static, InFlight> {
+    IN_FLIGHT.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, then a rename.
 ///
-/// Readers see either the old file or the complete new one, never a partial write.
+/// Readers see either the old file or the complete new one, never a partial write. The temporary
+/// file (`.NAME.tmp.PID.N`) is registered while it exists, so [`abort_writes`] can remove it.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let io = |error| WriteError::Io { path: path.to_path_buf(), error };
@@ -327,18 +369,44 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
         std::process::id(),
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
+    // Registered and created under the lock: `abort_writes` either sees the file or stops it being made.
+    let file = {
+        let mut g = in_flight();
+        if g.aborted {
+            return Err(WriteError::Invalid {
+                path: path.to_path_buf(),
+                what: "after the process was interrupted".into(),
+            });
+        }
+        let file = std::fs::File::create(&tmp).map_err(io)?;
+        g.tmps.push(tmp.clone());
+        file
+    };
     let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
+        let mut f = file;
         f.write_all(bytes)?;
         f.sync_all()?;
         drop(f);
         std::fs::rename(&tmp, path)
     })();
-    if let Err(e) = result {
+    if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
     }
-    Ok(())
+    let mut g = in_flight();
+    g.tmps.retain(|t| t != &tmp);
+    drop(g);
+    result.map_err(io)
+}
+
+/// Removes the temporary file of every [`write_atomic`] in flight and makes later writes fail;
+/// returns how many were removed. For a binary about to exit on a signal (SIGINT, SIGTERM): the
+/// caller should exit while the writes are still blocked, so no temporary file is left behind.
+pub fn abort_writes() -> usize {
+    let mut g = in_flight();
+    g.aborted = true;
+    let n = g.tmps.iter().filter(|t| std::fs::remove_file(t).is_ok()).count();
+    g.tmps.clear();
+    n
 }
 
 #[cfg(test)]
@@ -383,6 +451,65 @@ mod tests {
         let e = write_atomic(&missing, b"x").unwrap_err().to_string();
         assert!(e.starts_with(&format!("{}: ", missing.display())), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// CRC-32 (ISO-HDLC) as PNG chunks use it.
+    fn crc32(data: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in data {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+        }
+        !c
+    }
+
+    /// A small 16-bit gray PNG whose header is patched to claim `width`×`height` (valid CRC).
+    fn png_claiming(width: u32, height: u32) -> Vec<u8> {
+        let mut png = Vec::new();
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, vec![7u16; 12])
+            .unwrap()
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        png[16..20].copy_from_slice(&width.to_be_bytes());
+        png[20..24].copy_from_slice(&height.to_be_bytes());
+        let crc = crc32(&png[12..29]);
+        png[29..33].copy_from_slice(&crc.to_be_bytes());
+        png
+    }
+
+    #[test]
+    fn pixel_cap_is_checked_from_the_header_before_decoding() {
+        // 20000×20000 = 400 megapixels: refused by the default cap without decoding a pixel.
+        let e = read_bytes(&png_claiming(20000, 20000), Path::new("huge.png"), &ReadOptions::default())
+            .unwrap_err();
+        assert!(matches!(e, ReadError::TooManyPixels { width: 20000, height: 20000, .. }), "{e}");
+        let msg = e.to_string();
+        assert!(msg.starts_with("huge.png: ") && msg.contains("--max-pixels"), "{msg}");
+        // Every format obeys a lower cap.
+        let small = ReadOptions { max_pixels: 11, ..ReadOptions::default() };
+        let s16 = Grid::from_fn(4, 3, |x, y| (x * 1000 + y * 3 + 1) as u16);
+        let z = Grid::from_fn(4, 3, |x, y| 1.0 + 0.1 * x as f32 + 0.01 * y as f32);
+        let mut tiff = Vec::new();
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(4, 3, s16.as_slice().to_vec())
+            .unwrap()
+            .write_to(&mut std::io::Cursor::new(&mut tiff), image::ImageFormat::Tiff)
+            .unwrap();
+        let files = [
+            (abw::raster_to_bytes(&Grid::new(4, 3, 9u8)), "a.range"),
+            (pgm::pgm_to_bytes(&s16), "a.pgm"),
+            (png_claiming(4, 3), "a.png"),
+            (tiff, "a.tiff"),
+            (pcd::pcd_to_bytes(&z, &z, &z, Format::PcdBinary), "a.pcd"),
+        ];
+        for (bytes, name) in &files {
+            assert!(read_bytes(bytes, Path::new(name), &ReadOptions::default()).is_ok(), "{name}");
+            let e = read_bytes(bytes, Path::new(name), &small).unwrap_err();
+            assert!(matches!(e, ReadError::TooManyPixels { width: 4, height: 3, max_pixels: 11, .. }), "{e}");
+        }
+        let twelve = ReadOptions { max_pixels: 12, ..ReadOptions::default() };
+        assert!(read_bytes(&files[0].0, Path::new("a.range"), &twelve).is_ok(), "the cap is inclusive");
     }
 
     #[test]

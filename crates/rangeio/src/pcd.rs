@@ -48,6 +48,11 @@ pub fn read_pcd(path: &Path) -> Result<Cloud, ReadError> {
 ///
 /// Needs fields `x`, `y`, `z` of type `F` (4 or 8 bytes, count 1) and `HEIGHT` > 1.
 pub fn pcd_from_bytes(bytes: &[u8], path: &Path) -> Result<Cloud, ReadError> {
+    pcd_from_bytes_limited(bytes, path, crate::DEFAULT_MAX_PIXELS)
+}
+
+/// [`pcd_from_bytes`] refusing headers of more than `max_pixels` points.
+pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64) -> Result<Cloud, ReadError> {
     let p = || path.to_path_buf();
     let perr = |line: usize, problem: String| ReadError::Parse { path: p(), line, problem };
     let mut pos = 0;
@@ -98,7 +103,8 @@ pub fn pcd_from_bytes(bytes: &[u8], path: &Path) -> Result<Cloud, ReadError> {
                 break;
             }
             _ => {
-                return Err(perr(line_no, format!("unknown header keyword `{}`", &key[..key.len().min(32)])));
+                let shown: String = key.chars().take(32).collect();
+                return Err(perr(line_no, format!("unknown header keyword `{shown}`")));
             }
         }
     }
@@ -129,7 +135,7 @@ pub fn pcd_from_bytes(bytes: &[u8], path: &Path) -> Result<Cloud, ReadError> {
             what: "unorganized point cloud (HEIGHT 1): a range image needs an organized cloud".into(),
         });
     }
-    let (w, h) = check_dims(path, width, height)?;
+    let (w, h) = check_dims(path, width, height, max_pixels)?;
     let n = w * h;
     if let Some(pts) = points
         && pts != n as u64
@@ -171,6 +177,16 @@ pub fn pcd_from_bytes(bytes: &[u8], path: &Path) -> Result<Cloud, ReadError> {
         offset += bytes_here;
     }
     let record = offset;
+    // PCL pads records with fields named `_`; any other name must be unique, or which `z` is the
+    // range would be a guess.
+    for (i, name) in names.iter().enumerate() {
+        if name != "_" && names[..i].contains(name) {
+            return Err(ReadError::Invalid {
+                path: p(),
+                what: format!("pcd header: field `{name}` appears more than once in FIELDS"),
+            });
+        }
+    }
     let find = |name: &str| -> Result<&Field, ReadError> {
         let f = fields.iter().find(|f| f.name == name).ok_or_else(|| ReadError::Unsupported {
             path: p(),
@@ -438,6 +454,8 @@ mod tests {
             (good.replace("POINTS 40", "POINTS 41"), "POINTS 41 but"),
             (good.replace("DATA ascii", "DATA weird"), "unknown DATA"),
             (good.replace("WIDTH 8", "WIDTH 0"), "unsupported image size 0x5"),
+            (good.replace("FIELDS x y z", "FIELDS x z z"), "field `z` appears more than once"),
+            (format!("{}\n{good}", "é".repeat(40)), "unknown header keyword `ééé"),
         ];
         for (text, msg) in cases {
             let e = pcd_from_bytes(text.as_bytes(), Path::new("bad.pcd")).unwrap_err().to_string();

@@ -50,6 +50,16 @@ fn header_tokens(bytes: &[u8], n: usize) -> Option<(Vec<u64>, usize)> {
 /// 16-bit P5 samples are big-endian per the netpbm standard, little-endian with `little_endian`
 /// (as the NYU Depth v2 toolbox writes them). Samples above maxval are an error.
 pub fn pgm_from_bytes(bytes: &[u8], path: &Path, little_endian: bool) -> Result<Pgm, ReadError> {
+    pgm_from_bytes_limited(bytes, path, little_endian, crate::DEFAULT_MAX_PIXELS)
+}
+
+/// [`pgm_from_bytes`] refusing headers of more than `max_pixels` pixels.
+pub(crate) fn pgm_from_bytes_limited(
+    bytes: &[u8],
+    path: &Path,
+    little_endian: bool,
+    max_pixels: u64,
+) -> Result<Pgm, ReadError> {
     let p = || path.to_path_buf();
     let plain = match bytes.get(..2) {
         Some(b"P5") => false,
@@ -68,7 +78,7 @@ pub fn pgm_from_bytes(bytes: &[u8], path: &Path, little_endian: bool) -> Result<
             what: "pgm header: expected width, height and maxval".into(),
         });
     };
-    let (w, h) = check_dims(path, t[0], t[1])?;
+    let (w, h) = check_dims(path, t[0], t[1], max_pixels)?;
     let maxval = t[2];
     if maxval == 0 || maxval > 65535 {
         return Err(ReadError::Invalid {

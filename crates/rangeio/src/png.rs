@@ -80,6 +80,17 @@ pub fn write_label_png(path: &Path, labels: &LabelImage) -> Result<(), WriteErro
     write_rgb_png(path, &labels.map(|&l| label_color(l)))
 }
 
+/// Writes labels unchanged as a 16-bit gray PNG (0 = none); an error if a label exceeds 65535.
+pub fn write_label16_png(path: &Path, labels: &LabelImage) -> Result<(), WriteError> {
+    if let Some(&big) = labels.as_slice().iter().find(|&&l| l > u32::from(u16::MAX)) {
+        return Err(WriteError::Invalid {
+            path: path.to_path_buf(),
+            what: format!("label {big} in a 16-bit label png (labels must be at most 65535)"),
+        });
+    }
+    write_gray16_png(path, &labels.map(|&l| l as u16))
+}
+
 /// Writes an edge map as 8-bit gray: 255 = edge, 0 = not.
 pub fn write_edge_png(path: &Path, edges: &EdgeMap) -> Result<(), WriteError> {
     write_gray_png(path, &edges.map(|&e| if e { 255 } else { 0 }))
@@ -92,7 +103,7 @@ pub fn read_edge_png(path: &Path) -> Result<EdgeMap, ReadError> {
 
 /// [`read_edge_png`] on bytes in memory; `path` names the file in errors.
 pub fn edge_png_from_bytes(bytes: &[u8], path: &Path) -> Result<EdgeMap, ReadError> {
-    let img = raster::decode_image(bytes, path, ImageFormat::Png)?.into_luma8();
+    let img = raster::decode_image(bytes, path, ImageFormat::Png, crate::DEFAULT_MAX_PIXELS)?.into_luma8();
     let (w, h) = img.dimensions();
     Ok(Grid::from_vec(w, h, img.into_raw().into_iter().map(|v| v >= 128).collect()).expect("w·h samples"))
 }

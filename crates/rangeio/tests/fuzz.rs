@@ -73,6 +73,14 @@ fn read_all(bytes: &[u8], name: &str) {
 }
 
 proptest! {
+    // Seeded and bounded: the same cases on every run, a few seconds in all.
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(16),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+
     #[test]
     fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..300), k in 0usize..8) {
         let (_, name) = seeds()[k];
@@ -104,6 +112,21 @@ proptest! {
             bytes.truncate(cut.index(bytes.len() + 1));
         }
         read_all(&bytes, name);
+    }
+
+    /// Header words and PGM/PCD sizes set to absurd values (20000 and 30000 per side, the largest
+    /// values): no panic, and every error names the file.
+    #[test]
+    fn absurd_header_sizes_are_refused(k in 0usize..8, at in 0usize..64, v in prop_oneof![
+        Just(u32::MAX), Just(20000u32), Just(30000), Just(32768), Just(32769), Just(0), any::<u32>()
+    ]) {
+        let (seed, name) = &seeds()[k];
+        let mut bytes = seed.clone();
+        let at = at.min(bytes.len().saturating_sub(4));
+        bytes[at..at + 4].copy_from_slice(&v.to_be_bytes());
+        read_all(&bytes, name);
+        let text = String::from_utf8_lossy(seed).replace(" 4 3 ", &format!(" {v} {v} ")).replace("WIDTH 4", &format!("WIDTH {v}"));
+        read_all(text.as_bytes(), name);
     }
 
     #[test]
