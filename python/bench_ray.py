@@ -12,13 +12,17 @@ from __future__ import annotations
 import argparse
 import glob
 import os
+import sys
 import tempfile
 import time
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from rangeseg import ray as rray
+# This script sits beside the package's sources (python/rangeseg, without the compiled module): import the
+# installed package instead.
+sys.path = [p for p in sys.path if os.path.abspath(p or ".") != os.path.dirname(os.path.abspath(__file__))]
+from rangeseg import ray as rray  # noqa: E402
 
 
 def main() -> None:
