@@ -6,8 +6,10 @@ pub mod config;
 pub mod evaluate;
 pub mod output;
 pub mod pipeline;
+pub mod planes;
 
 pub use config::{C1Strength, Config, ConfigError, PipelineParams};
 pub use output::write_outputs;
 pub use pipeline::{Output, segment};
+pub use planes::{Plane, planes};
 pub use {eval, features, rangeimage, rangeio, regiongrow, relax, vcanny};

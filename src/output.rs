@@ -1,7 +1,8 @@
 //! Writing one image's pipeline results to disk in the ABW formats and as PNGs.
 
 use crate::pipeline::Output;
-use rangeimage::{LabelImage, Region};
+use crate::planes::Plane;
+use rangeimage::{Camera, LabelImage, Region};
 use rangeio::Frame;
 use std::path::Path;
 
@@ -59,8 +60,9 @@ pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u6
     (lost.len(), px)
 }
 
-/// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.labels.png`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png` and
-/// `STEM.regions.png` into `dir`, each atomically, and returns a JSON summary (counts, energies) for `STEM.json`.
+/// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.labels.png`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png`,
+/// `STEM.regions.png` and `STEM.planes.json` ([`write_planes_json`]) into `dir`, each atomically, and returns a JSON
+/// summary (counts, energies) for `STEM.json`.
 pub fn write_outputs(
     dir: &Path,
     stem: &str,
@@ -75,6 +77,8 @@ pub fn write_outputs(
     rangeio::png::write_edge_png(&path("c1.png"), &out.regions.c1)?;
     rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;
     rangeio::png::write_label_png(&path("regions.png"), &out.fin.labels)?;
+    let planes = crate::planes::planes(&frame.range, &out.fin.labels, &frame.camera);
+    write_planes_json(&path("planes.json"), &frame.camera, &planes)?;
 
     let (lost, lost_px) = ms_seg_cap_loss(&out.fin.labels, &mapping);
     let count = |e: &rangeimage::EdgeMap| e.as_slice().iter().filter(|&&b| b).count();
@@ -103,4 +107,13 @@ pub fn write_outputs(
             "acceptance_rate": info.acceptance_rate,
         },
     }))
+}
+
+/// Writes the final regions' planes ([`crate::planes()`]) as JSON, atomically: `{"camera": …, "planes": [{"label",
+/// "normal", "d", "centroid", "pixels", "rms", "bbox"}, …]}` with `normal · X = d` in the camera's frame; a
+/// region with fewer than 3 points has `null` normal and d.
+pub fn write_planes_json(path: &Path, camera: &Camera, planes: &[Plane]) -> Result<(), rangeio::WriteError> {
+    let json = serde_json::json!({ "camera": camera, "planes": planes });
+    let text = serde_json::to_string_pretty(&json).expect("json values serialise");
+    rangeio::write_atomic(path, text.as_bytes())
 }

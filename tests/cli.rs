@@ -29,7 +29,7 @@ fn score_of_written_outputs_equals_in_memory_scores() {
     let out_dir = dir.path().join("out");
     let o = rangeseg(&["segment".as_ref(), range_path.as_os_str(), "-o".as_ref(), out_dir.as_os_str()]);
     assert!(o.status.success(), "segment failed: {}", String::from_utf8_lossy(&o.stderr));
-    for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png", "json"] {
+    for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png", "json", "planes.json"] {
         assert!(out_dir.join(format!("abw.train.0.{ext}")).is_file(), "missing output .{ext}");
     }
 
@@ -52,6 +52,11 @@ fn score_of_written_outputs_equals_in_memory_scores() {
     let gt = rangeio::abw::read_labels(&gt_path, true).unwrap();
     let frame = rangeio::read(&range_path, &Default::default()).unwrap();
     let out = rangeseg::segment(&frame.range, &frame.camera, &Config::default());
+    let planes = rangeseg::planes(&frame.range, &out.fin.labels, &frame.camera);
+    let want = serde_json::json!({ "camera": frame.camera, "planes": planes });
+    let text = std::fs::read_to_string(out_dir.join("abw.train.0.planes.json")).unwrap();
+    assert_eq!(text, serde_json::to_string_pretty(&want).unwrap());
+    assert_eq!(planes.len(), out.fin.final_regions.len());
     let h = rangeseg::evaluate::hoover(&gt, &out.fin.labels, &out.fin.final_regions, &scene.angles);
     let e = rangeseg::evaluate::score_edges(out.fin.edges(), &out.regions.c1, &gt);
     let hj = &json["hoover"];

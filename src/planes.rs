@@ -1,0 +1,284 @@
+//! Plane equations of a segmentation's regions: a least-squares fit to each region's 3D points.
+
+use rangeimage::{Camera, LabelImage, RangeImage};
+use serde::Serialize;
+
+/// One labelled region as a plane `normal · X = d` in the camera's frame (metres for a metric pinhole camera,
+/// the calibration's units for ABW, the image's own units `(x, y, value)` for the grid camera).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Plane {
+    /// The region's label in the label image (never 0).
+    pub label: u32,
+    /// Unit normal, oriented toward the sensor; NaN when the region has fewer than 3 points.
+    pub normal: [f64; 3],
+    /// Offset: `normal · X = d` for the points X of the plane; NaN when `normal` is.
+    pub d: f64,
+    /// Mean of the region's 3D points.
+    pub centroid: [f64; 3],
+    /// Number of pixels carrying the label.
+    pub pixels: u64,
+    /// Root-mean-square point-to-plane distance of the region's 3D points.
+    pub rms: f64,
+    /// Bounding box in pixels, inclusive: `[x_min, y_min, x_max, y_max]`.
+    pub bbox: [u32; 4],
+}
+
+/// Per-label sums gathered over the image.
+#[derive(Clone)]
+struct Acc {
+    pixels: u64,
+    points: u64,
+    sum: [f64; 3],
+    cov: [[f64; 3]; 3],
+    sq_residual: f64,
+    bbox: [u32; 4],
+}
+
+/// Fits a plane to every region of `labels` (label 0 = none) from the 3D points the camera gives the pixels'
+/// range values; sorted by label.
+///
+/// The normal is the eigenvector of the smallest eigenvalue of the points' covariance (total least squares,
+/// computed about the centroid in f64), flipped to face the sensor. Pixels without a range value count in
+/// `pixels` and `bbox` but not in the fit. Deterministic: the sums run in pixel order.
+///
+/// # Panics
+/// If `labels` and `range` differ in size.
+pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
+    assert_eq!(range.dimensions(), labels.dimensions(), "range and labels differ in size");
+    let (w, _) = labels.dimensions();
+    let w = w as usize;
+    let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let empty = Acc {
+        pixels: 0,
+        points: 0,
+        sum: [0.0; 3],
+        cov: [[0.0; 3]; 3],
+        sq_residual: 0.0,
+        bbox: [u32::MAX, u32::MAX, 0, 0],
+    };
+    let mut acc = vec![empty; ids.len()];
+    let index = |l: u32| ids.binary_search(&l).expect("every label was collected");
+    let point = |i: usize, v: f32| camera.point((i % w) as f64, (i / w) as f64, f64::from(v));
+    let pixels = || range.as_slice().iter().zip(labels.as_slice()).enumerate().filter(|(_, (_, l))| **l != 0);
+
+    for (i, (&v, &l)) in pixels() {
+        let a = &mut acc[index(l)];
+        let (x, y) = ((i % w) as u32, (i / w) as u32);
+        a.pixels += 1;
+        a.bbox = [a.bbox[0].min(x), a.bbox[1].min(y), a.bbox[2].max(x), a.bbox[3].max(y)];
+        if let Some(p) = point(i, v) {
+            a.points += 1;
+            for k in 0..3 {
+                a.sum[k] += p[k];
+            }
+        }
+    }
+    let centroids: Vec<[f64; 3]> = acc.iter().map(|a| a.sum.map(|s| s / a.points as f64)).collect();
+    for (i, (&v, &l)) in pixels() {
+        let j = index(l);
+        if let Some(p) = point(i, v) {
+            let q = sub(p, centroids[j]);
+            for r in 0..3 {
+                for c in r..3 {
+                    acc[j].cov[r][c] += q[r] * q[c];
+                }
+            }
+        }
+    }
+    let normals: Vec<[f64; 3]> = acc
+        .iter()
+        .zip(&centroids)
+        .map(|(a, &c)| {
+            if a.points < 3 {
+                return [f64::NAN; 3];
+            }
+            let n = smallest_eigenvector(a.cov);
+            if dot(n, camera.toward_sensor(c)) < 0.0 { n.map(|v| -v) } else { n }
+        })
+        .collect();
+    for (i, (&v, &l)) in pixels() {
+        let j = index(l);
+        if let Some(p) = point(i, v) {
+            let r = dot(normals[j], sub(p, centroids[j]));
+            acc[j].sq_residual += r * r;
+        }
+    }
+
+    ids.iter()
+        .zip(acc)
+        .zip(centroids.iter().zip(&normals))
+        .map(|((&label, a), (&centroid, &normal))| Plane {
+            label,
+            normal,
+            d: dot(normal, centroid),
+            centroid,
+            pixels: a.pixels,
+            rms: (a.sq_residual / a.points as f64).sqrt(),
+            bbox: a.bbox,
+        })
+        .collect()
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix given by its upper triangle,
+/// by cyclic Jacobi rotations (deterministic, accurate for the tiny eigenvalues of near-planar point sets).
+fn smallest_eigenvector(upper: [[f64; 3]; 3]) -> [f64; 3] {
+    let mut a = upper;
+    for r in 0..3 {
+        for c in 0..r {
+            a[r][c] = a[c][r];
+        }
+    }
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..50 {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if off <= diag * 1e-32 || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            // Rotation that zeroes a[p][q] (Numerical Recipes' form, stable for small angles).
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in &mut v {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let k = (0..3).fold(0, |best, k| if a[k][k] < a[best][best] { k } else { best });
+    let n = [v[0][k], v[1][k], v[2][k]];
+    let len = dot(n, n).sqrt();
+    n.map(|x| x / len)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Grid;
+
+    /// Depth image of the plane `n · X = d` seen by a pinhole camera: Z where each pixel's ray meets it.
+    fn pinhole_plane(cam: Camera, n: [f64; 3], d: f64, w: u32, h: u32) -> RangeImage {
+        let Camera::Pinhole { fx, fy, cx, cy, .. } = cam else { unreachable!() };
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = (f64::from(i % w), f64::from(i / w));
+                let ray = [(x - cx) / fx, (y - cy) / fy, 1.0];
+                (d / dot(n, ray)) as f32
+            })
+            .collect();
+        Grid::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn recovers_a_known_pinhole_plane() {
+        let cam = Camera::Pinhole { fx: 500.0, fy: 480.0, cx: 31.5, cy: 23.5, depth_scale: 1.0 };
+        let len = (0.2f64 * 0.2 + 0.3 * 0.3 + 1.0).sqrt();
+        // Facing the camera: n points from the plane toward the origin, so n · X = d < 0.
+        let n = [0.2 / len, -0.3 / len, -1.0 / len];
+        let d = -2.5;
+        let range = pinhole_plane(cam, n, d, 64, 48);
+        let mut labels = Grid::from_vec(64, 48, vec![1u32; 64 * 48]).unwrap();
+        labels[(0, 0)] = 0;
+        let p = planes(&range, &labels, &cam);
+        assert_eq!(p.len(), 1);
+        let p = &p[0];
+        assert_eq!((p.label, p.pixels, p.bbox), (1, 64 * 48 - 1, [0, 0, 63, 47]));
+        for k in 0..3 {
+            assert!((p.normal[k] - n[k]).abs() < 1e-6, "{:?} vs {n:?}", p.normal);
+        }
+        assert!((p.d - d).abs() < 1e-5, "{}", p.d);
+        // f32 depths: residuals are the rounding of Z (about 1e-7 m).
+        assert!(p.rms < 1e-6, "{}", p.rms);
+        assert!((dot(p.normal, p.centroid) - p.d).abs() < 1e-12);
+    }
+
+    #[test]
+    fn grid_plane_with_known_residual_and_several_regions() {
+        // Two regions: v = 0.5x − 0.25y + 10 (one pixel without data) on the left, v = 40 ± e (a checkerboard of
+        // offsets) on the right.
+        let (w, h, e) = (20u32, 10u32, 0.125f32);
+        let mut data = Vec::new();
+        let mut lab = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                if x < 10 {
+                    data.push(if x == 5 && y == 5 {
+                        f32::NAN
+                    } else {
+                        0.5 * x as f32 - 0.25 * y as f32 + 10.0
+                    });
+                    lab.push(7);
+                } else {
+                    data.push(if (x + y) % 2 == 0 { 40.0 + e } else { 40.0 - e });
+                    lab.push(3);
+                }
+            }
+        }
+        let range = Grid::from_vec(w, h, data).unwrap();
+        let labels = Grid::from_vec(w, h, lab).unwrap();
+        let p = planes(&range, &labels, &Camera::Grid);
+        assert_eq!(p.iter().map(|p| p.label).collect::<Vec<_>>(), [3, 7]);
+        // The flat region: normal (0, 0, −1) faces the grid's sensor direction, d = −40, residuals ±e.
+        assert_eq!(p[0].normal, [0.0, 0.0, -1.0]);
+        assert_eq!((p[0].d, p[0].rms, p[0].pixels, p[0].bbox), (-40.0, f64::from(e), 100, [10, 0, 19, 9]));
+        // The tilted one: 0.5x − 0.25y − v = −10, normalised; the pixel without data counts as a pixel only.
+        let len = (0.25f64 + 0.0625 + 1.0).sqrt();
+        let n = [0.5 / len, -0.25 / len, -1.0 / len];
+        for k in 0..3 {
+            assert!((p[1].normal[k] - n[k]).abs() < 1e-12, "{:?}", p[1].normal);
+        }
+        assert!(p[1].rms < 1e-12, "{}", p[1].rms);
+        assert!((p[1].d - (-10.0 / len)).abs() < 1e-12, "{}", p[1].d);
+        assert_eq!((p[1].pixels, p[1].bbox), (100, [0, 0, 9, 9]));
+    }
+
+    #[test]
+    fn tiny_regions_have_no_plane() {
+        let range = Grid::from_vec(3, 1, vec![1.0, 2.0, f32::NAN]).unwrap();
+        let labels = Grid::from_vec(3, 1, vec![0, 5, 5]).unwrap();
+        let p = planes(&range, &labels, &Camera::Grid);
+        assert_eq!((p.len(), p[0].pixels, p[0].bbox), (1, 2, [1, 0, 2, 0]));
+        assert!(p[0].normal[0].is_nan() && p[0].d.is_nan());
+        assert_eq!(p[0].centroid, [1.0, 0.0, 2.0]);
+    }
+
+    #[test]
+    fn eigenvector_of_a_diagonal_and_a_rotated_matrix() {
+        assert_eq!(
+            smallest_eigenvector([[3.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 2.0]]),
+            [0.0, 1.0, 0.0]
+        );
+        // Eigenvalues 1, 2, 3 with the smallest along (1, 1, 0)/√2.
+        let m = [[1.5, -0.5, 0.0], [0.0, 1.5, 0.0], [0.0, 0.0, 3.0]];
+        let n = smallest_eigenvector(m);
+        let r = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((n[0].abs() - r).abs() < 1e-12 && (n[1].abs() - r).abs() < 1e-12 && n[2].abs() < 1e-12);
+    }
+}
