@@ -28,7 +28,10 @@ pub struct SegmentParams {
     pub min_region_px: u32,
     /// Core pixels, whose components seed the regions, are the valid pixels farther than this
     /// from every edge pixel (Euclidean); 0 = every non-edge pixel. A positive value closes gaps
-    /// up to about twice as wide in the edge contours, which Canny edges and pruned borders have.
+    /// up to about twice as wide in the edge contours, which Canny edges and pruned borders have,
+    /// but also drops the thin strips between parallel C1 and C2 lines and leaves every pixel of the
+    /// margin to the plane-residual fill; in `regions` mode the region-growing borders already
+    /// close the contours, and 0 scores better on the synthetic, real ABW and NYU images.
     pub gap_close_px: f64,
     /// `regions` mode: pixels that region growing left unlabelled (0) may be core pixels too,
     /// connected only among themselves (so faces region growing missed can still be found);
@@ -59,7 +62,7 @@ impl Default for SegmentParams {
         Self {
             mode: SegmentMode::Regions,
             min_region_px: 50,
-            gap_close_px: 2.0,
+            gap_close_px: 0.0,
             unlabelled_core: true,
             min_border_support: 0.3,
             merge_within_region: true,
@@ -704,8 +707,8 @@ mod tests {
         let open = SegmentParams { gap_close_px: 0.0, ..SegmentParams::default() };
         let (_, regions) = final_segmentation(&range, &Camera::Grid, &edges, None, &open);
         assert_eq!(regions.len(), 1, "without gap closing the two faces leak into one component");
-        let (labels, regions) =
-            final_segmentation(&range, &Camera::Grid, &edges, None, &SegmentParams::default());
+        let closing = SegmentParams { gap_close_px: 2.0, ..SegmentParams::default() };
+        let (labels, regions) = final_segmentation(&range, &Camera::Grid, &edges, None, &closing);
         assert_eq!(regions.len(), 2);
         for y in 0..30 {
             assert_eq!(labels[(10, y)], 1);
