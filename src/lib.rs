@@ -7,7 +7,7 @@ pub mod evaluate;
 pub mod output;
 pub mod pipeline;
 
-pub use config::{C1Strength, Config, ConfigError, PipelineParams};
+pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams};
 pub use output::write_outputs;
 pub use pipeline::{Output, segment};
 pub use {eval, features, rangeimage, rangeio, regiongrow, relax, vcanny};

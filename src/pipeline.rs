@@ -1,6 +1,6 @@
 //! The whole method on one in-memory range image: features → regions (C1) and Canny (C2) → relaxation → labels.
 
-use crate::config::{C1Strength, Config};
+use crate::config::{C1Strength, Config, FinalEdges};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 use serde::Serialize;
 use std::time::Instant;
@@ -38,7 +38,7 @@ pub struct Output {
 /// What the last stage produces: relaxed edges and the final segmentation.
 #[derive(Debug, Clone)]
 pub struct Finish {
-    /// C1 and C2 after relaxation, and the final edge map C = C1 ∪ C2.
+    /// C1 and C2 after relaxation, and their union with C2 restricted by the support test.
     pub relaxed: relax::Relaxed,
     /// Relaxation diagnostics (energies, acceptance).
     pub relax_info: relax::Info,
@@ -46,12 +46,14 @@ pub struct Finish {
     pub labels: LabelImage,
     /// Geometry of each final region.
     pub final_regions: Vec<Region>,
+    /// The final edge map C (`pipeline.final_edges`: the final segmentation's borders, or `relaxed.edges`).
+    pub edges: EdgeMap,
 }
 
 impl Finish {
     /// The final edge map C.
     pub fn edges(&self) -> &EdgeMap {
-        &self.relaxed.edges
+        &self.edges
     }
 }
 
@@ -106,7 +108,11 @@ pub fn finish(
     // two faces that region growing merged has only C2 to show it.
     let (labels, final_regions) =
         relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
-    Finish { relaxed, relax_info, labels, final_regions }
+    let edges = match config.pipeline.final_edges {
+        FinalEdges::Relaxed => relaxed.edges.clone(),
+        FinalEdges::Segmentation => regiongrow::borders(&labels, config.regiongrow.c1_one_sided),
+    };
+    Finish { relaxed, relax_info, labels, final_regions, edges }
 }
 
 /// The C1 strength map s1 for the relaxation energy; 0 where undefined.
