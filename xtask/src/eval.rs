@@ -1,9 +1,9 @@
 //! `cargo xtask eval`: the paper's protocol on the test split, and a report people read.
 
+use crate::data::{self, DataSpec, LabelledImage, LoadedImage, Role};
 use crate::report::{self, ImageRow, Report};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use rangeio::abw::{AbwImage, Dataset};
 use rangeseg::Config;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -12,23 +12,27 @@ use std::time::Instant;
 /// Options of `cargo xtask eval`.
 struct Options {
     config: PathBuf,
-    data: Option<PathBuf>,
+    data: DataSpec,
     out: PathBuf,
 }
 
+const EVAL_USAGE: &str =
+    "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic [--camera CAM]] [--out DIR]";
+
 fn parse(root: &Path, args: &[String]) -> Result<Options> {
-    let mut o =
-        Options { config: root.join("configs/default.toml"), data: None, out: root.join("target/eval") };
-    let mut it = args.iter();
+    let (mut specs, rest) = data::parse_specs(args)?;
+    if specs.len() > 1 {
+        bail!("eval reads one data set; run it once per --data\n{EVAL_USAGE}");
+    }
+    let data = specs.pop().unwrap_or_else(DataSpec::synthetic);
+    let mut o = Options { config: root.join("configs/default.toml"), data, out: root.join("target/eval") };
+    let mut it = rest.iter();
     while let Some(a) = it.next() {
         let mut value = || it.next().cloned().with_context(|| format!("{a} needs a value"));
         match a.as_str() {
             "--config" => o.config = value()?.into(),
-            "--data" => o.data = Some(value()?.into()),
             "--out" => o.out = value()?.into(),
-            other => bail!(
-                "unknown option {other}\nusage: cargo xtask eval [--config C.toml] [--data DIR] [--out DIR]"
-            ),
+            other => bail!("unknown option {other}\n{EVAL_USAGE}"),
         }
     }
     Ok(o)
@@ -39,31 +43,26 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let started = Instant::now();
     let o = parse(root, args)?;
     let config = Config::load(&o.config)?;
-    let data = match &o.data {
-        Some(d) => d.clone(),
-        None => crate::gen_data::ensure_synthetic_data(root)?,
-    };
-    let dataset = Dataset::discover(&data)?;
-    if dataset.test.is_empty() {
-        bail!("{}: no test images (abw.test.N.range)", data.display());
-    }
+    let set = data::discover(root, &o.data, Role::Eval)?;
     let out_dir = o.out.join("out");
     let fig_dir = o.out.join("figures");
     for d in [&out_dir, &fig_dir] {
         std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create", d.display()))?;
     }
     eprintln!(
-        "evaluating {} test images from {} with {}",
-        dataset.test.len(),
-        data.display(),
+        "evaluating {} images ({}) of {} from {} with {}",
+        set.images.len(),
+        set.selection,
+        set.name,
+        set.dir.display(),
         o.config.display()
     );
-    let bar = ProgressBar::new(dataset.test.len() as u64).with_style(
+    let bar = ProgressBar::new(set.images.len() as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} [{elapsed_precise} < {eta_precise}]")
             .expect("template"),
     );
-    let rows: Vec<ImageRow> = dataset
-        .test
+    let rows: Vec<ImageRow> = set
+        .images
         .par_iter()
         .map(|img| {
             let r = evaluate_one(img, &config, &out_dir, &fig_dir);
@@ -74,7 +73,10 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     bar.finish_and_clear();
 
     let report = Report {
-        data_dir: crate::shown(root, &data),
+        data_name: set.name.clone(),
+        data_dir: crate::shown(root, &set.dir),
+        selection: set.selection.to_string(),
+        camera: set.camera.clone(),
         config_path: crate::shown(root, &o.config),
         config_toml: config.to_toml(),
         rows,
@@ -88,16 +90,9 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
 }
 
 /// Runs the pipeline on one test image, writes its outputs and figure, and scores it.
-fn evaluate_one(img: &AbwImage, config: &Config, out_dir: &Path, fig_dir: &Path) -> Result<ImageRow> {
+fn evaluate_one(img: &LabelledImage, config: &Config, out_dir: &Path, fig_dir: &Path) -> Result<ImageRow> {
     let t = Instant::now();
-    let frame =
-        rangeio::read(&img.range, &rangeio::ReadOptions { camera: Some(img.camera), ..Default::default() })?;
-    let gt_path = img.gt_seg.as_ref().with_context(|| format!("{}: no ground truth (.gt-seg)", img.stem))?;
-    let gt = rangeio::abw::read_labels(gt_path, true)?;
-    let angles: Vec<(u32, u32, f64)> = match &img.gt_ang {
-        Some(p) => rangeio::abw::read_angles(p)?.iter().map(|a| (a.a, a.b, a.angle_deg)).collect(),
-        None => Vec::new(),
-    };
+    let LoadedImage { frame, gt, angles, .. } = img.load()?;
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
 
     let t_total = Instant::now();

@@ -1,6 +1,7 @@
 //! Project automation behind `cargo xtask` (gen-data, tune, eval, tidy), as a library so that
 //! subcommands and tests can share helpers such as [`gen_data::ensure_synthetic_data`].
 
+pub mod data;
 pub mod eval;
 pub mod gen_data;
 mod report;
@@ -13,12 +14,15 @@ use std::path::{Path, PathBuf};
 pub const USAGE: &str = "usage: cargo xtask <command>
 
 commands:
-  eval [--config C.toml] [--data DIR] [--out DIR]
-      Run the test split (the synthetic benchmark by default, generated on first use; real ABW files
-      with --data) and write target/eval/report.{md,html}, results.{csv,json} and figures
-  tune [--grid configs/tune.toml] [--objective NAME] [--write]
-      Sweep the grid over the training split only; write target/tune/{results.csv,best.toml,report.md};
-      --write also updates configs/default.toml
+  eval [--config C.toml] [--data DIR|synthetic [--camera CAM]] [--out DIR]
+      Run one data set (default: the synthetic benchmark's test split, generated on first use; a folder of
+      ABW files gives its test split; any other folder every STEM.range with a STEM.gt-seg, which needs
+      --camera unless the names are ABW names) and write target/eval/report.{md,html}, results.{csv,json}
+      and figures
+  tune [--grid configs/tune.toml] [--objective NAME] [--data DIR|synthetic [--camera CAM]]... [--write]
+      Sweep the grid over one or more data sets (default: the synthetic training split; a folder without a
+      training split gives every labelled image); one objective, the mean over the sets; write
+      target/tune/{results.csv,best.toml,report.md}; --write also updates configs/default.toml
   gen-data [--out DIR] [--check] [--figures]
       Generate the synthetic ABW-like benchmark (10 train + 30 test) into data/synthetic-abw/
       and its MANIFEST.sha256; --check regenerates and compares with the committed manifest;

@@ -1,21 +1,22 @@
-//! `cargo xtask tune`: a parameter grid over the training split, with stage outputs cached.
+//! `cargo xtask tune`: a parameter grid over one or more data sets (by default the synthetic training split), with
+//! stage outputs cached.
 
+use crate::data::{DataSet, DataSpec, Role};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use rangeimage::{Camera, LabelImage, RangeImage, SurfaceFeatures};
-use rangeio::abw::Dataset;
 use rangeseg::Config;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// Objectives a grid can maximise, with what each measures on the training split.
+/// Objectives a grid can maximise, with what each measures on a data set; over several sets, the mean of the sets'.
 const OBJECTIVES: &[(&str, &str)] = &[
     (
         "hoover_correct",
-        "mean Hoover correct detections at T = 0.8 minus half the over- and under-segmentations",
+        "mean Hoover correct detections at T = 0.8 minus half the over- and under-segmentations, as a fraction of the GT regions",
     ),
     ("boundary_f", "mean one-to-one boundary F (τ = 2 px) of the final edge map"),
     ("paper_precision", "mean paper precision of the final edge map against C1 (the paper's protocol)"),
@@ -33,8 +34,9 @@ struct TuneFile {
     grid: BTreeMap<String, Vec<toml::Value>>,
 }
 
-/// One training image, read once.
+/// One tuning image, read once, and the index of its data set.
 struct Image {
+    set: usize,
     stem: String,
     range: RangeImage,
     camera: Camera,
@@ -73,7 +75,8 @@ struct Sample {
 
 fn objective(name: &str, s: &Sample) -> f64 {
     match name {
-        "hoover_correct" => s.correct - 0.5 * (s.over + s.under),
+        // Normalised so that data sets with more regions per image do not outweigh the others.
+        "hoover_correct" => (s.correct - 0.5 * (s.over + s.under)) / s.gt_regions.max(1.0),
         "boundary_f" => s.f,
         "paper_precision" => s.pp,
         _ => unreachable!("objective names are checked when the grid is read"),
@@ -85,14 +88,18 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let mut grid_path = root.join("configs/tune.toml");
     let mut objective_name: Option<String> = None;
     let mut write = false;
-    let mut it = args.iter();
+    let (mut specs, rest) = crate::data::parse_specs(args)?;
+    if specs.is_empty() {
+        specs.push(DataSpec::synthetic());
+    }
+    let mut it = rest.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--grid" => grid_path = it.next().context("--grid needs a file")?.into(),
             "--objective" => objective_name = Some(it.next().context("--objective needs a name")?.clone()),
             "--write" => write = true,
             other => bail!(
-                "unknown option {other}\nusage: cargo xtask tune [--grid configs/tune.toml] [--objective NAME] [--write]"
+                "unknown option {other}\nusage: cargo xtask tune [--grid configs/tune.toml] [--objective NAME] [--data DIR|synthetic [--camera CAM]]... [--write]"
             ),
         }
     }
@@ -112,14 +119,18 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         toml::from_str(&base_text).with_context(|| format!("{}: invalid TOML", base_path.display()))?;
     let combos = expand_grid(&base, &tune.grid, &grid_path)?;
 
-    let data = crate::gen_data::ensure_synthetic_data(root)?;
-    let dataset = Dataset::discover(&data)?;
-    // Tuning reads the training split only: the test split is never touched here.
-    let images = read_images(&dataset)?;
+    // A folder with a training split gives only that split: the synthetic test split is never touched here.
+    let sets: Vec<DataSet> =
+        specs.iter().map(|spec| crate::data::discover(root, spec, Role::Tune)).collect::<Result<_>>()?;
+    let images = read_images(&sets)?;
     eprintln!(
-        "tuning {} combinations × {} training images, objective {objective_name}",
+        "tuning {} combinations × {} images ({}), objective {objective_name}",
         combos.len(),
-        images.len()
+        images.len(),
+        sets.iter()
+            .map(|s| format!("{} {}: {}", s.name, s.selection, s.images.len()))
+            .collect::<Vec<_>>()
+            .join("; ")
     );
 
     let features_cache: Cache<SurfaceFeatures> = Cache::new();
@@ -138,7 +149,7 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         .map(|&(c, i)| {
             let (_, config) = &combos[c];
             let img = &images[i];
-            let fkey = format!("{}|{}", img.stem, toml_of(&config.features));
+            let fkey = format!("{}|{}|{}", img.set, img.stem, toml_of(&config.features));
             let features =
                 features_cache.get(fkey.clone(), || features::compute(&img.range, &config.features));
             let rkey = format!("{fkey}|{}|{}", toml_of(&config.regiongrow), config.seed);
@@ -179,24 +190,27 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         .collect();
     bar.finish_and_clear();
 
-    // Average per combination in a fixed order (rayon's float reductions depend on scheduling).
-    let n = images.len() as f64;
-    let means: Vec<(Sample, f64)> = (0..combos.len())
+    // Average per combination and data set in a fixed order (rayon's float reductions depend on scheduling); the
+    // objective of a combination is the mean of its sets' objectives, so each set weighs the same.
+    let per_set: Vec<Vec<Sample>> = (0..combos.len())
         .map(|c| {
             let rows = &samples[c * images.len()..(c + 1) * images.len()];
-            let mut m = Sample::default();
-            for s in rows {
-                m.correct += s.correct / n;
-                m.over += s.over / n;
-                m.under += s.under / n;
-                m.gt_regions += s.gt_regions / n;
-                m.rg_correct += s.rg_correct / n;
-                m.f += s.f / n;
-                m.c2_f += s.c2_f / n;
-                m.pp += s.pp / n;
-            }
-            let score = objective(&objective_name, &m);
-            (m, score)
+            (0..sets.len())
+                .map(|k| {
+                    let set_rows: Vec<&Sample> =
+                        rows.iter().zip(&images).filter(|(_, img)| img.set == k).map(|(s, _)| s).collect();
+                    mean_sample(&set_rows)
+                })
+                .collect()
+        })
+        .collect();
+    let n_sets = sets.len() as f64;
+    let means: Vec<(Sample, f64)> = per_set
+        .iter()
+        .map(|set_means| {
+            let score = set_means.iter().map(|m| objective(&objective_name, m)).sum::<f64>() / n_sets;
+            let refs: Vec<&Sample> = set_means.iter().collect();
+            (mean_sample(&refs), score)
         })
         .collect();
     // Best: highest score; ties (frequent: Hoover counts on 10 images saturate) go to the better region growing
@@ -212,12 +226,18 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;
     let keys: Vec<&String> = tune.grid.keys().collect();
     let mut csv = keys.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(",");
-    csv.push_str(",objective,correct,over,under,gt_regions,rg_correct,f,c2_f,paper_precision\n");
+    csv.push_str(",objective,correct,over,under,gt_regions,rg_correct,f,c2_f,paper_precision");
+    for set in &sets {
+        let _ = write!(csv, ",objective_{}", set.name);
+    }
+    csv.push('\n');
     for (c, (m, score)) in means.iter().enumerate() {
         let vals: Vec<String> = combos[c].0.iter().map(|v| v.to_string()).collect();
+        let set_scores: String =
+            per_set[c].iter().map(|m| format!(",{:.5}", objective(&objective_name, m))).collect();
         let _ = writeln!(
             csv,
-            "{},{score:.5},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}",
+            "{},{score:.5},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}{set_scores}",
             vals.join(","),
             m.correct,
             m.over,
@@ -233,11 +253,18 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let best_toml = best_config.to_toml();
     let (bm, bs) = &means[best];
     let mut report = format!(
-        "# rangeseg tuning\n\nGrid `{}` ({} combinations) over the {} training images; objective `{objective_name}`: {}.\n\n",
+        "# rangeseg tuning\n\nGrid `{}` ({} combinations) over {} images of {} data set{} ({}); objective `{objective_name}`: {}{}.\n\n",
         crate::shown(root, &grid_path),
         combos.len(),
         images.len(),
-        OBJECTIVES.iter().find(|(n, _)| *n == objective_name).map(|(_, d)| *d).unwrap_or("")
+        sets.len(),
+        if sets.len() == 1 { "" } else { "s" },
+        sets.iter()
+            .map(|s| format!("{}, {}, {} images", s.name, s.selection, s.images.len()))
+            .collect::<Vec<_>>()
+            .join("; "),
+        OBJECTIVES.iter().find(|(n, _)| *n == objective_name).map(|(_, d)| *d).unwrap_or(""),
+        if sets.len() > 1 { "; the mean over the data sets" } else { "" }
     );
     let _ = writeln!(report, "## Best combination (objective {bs:.4})\n");
     for (k, v) in keys.iter().zip(&combos[best].0) {
@@ -245,7 +272,27 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     }
     let _ = writeln!(
         report,
-        "\nTraining means: correct {:.2} of {:.2} GT regions (region growing alone {:.2}), over {:.2}, under {:.2}, boundary F {:.4} (C2 alone {:.4}), paper precision vs C1 {:.4}.",
+        "\n| data set | objective | correct | GT regions | region growing alone | over | under | boundary F | C2 alone F | paper precision vs C1 |\n|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for (set, m) in sets.iter().zip(&per_set[best]) {
+        let _ = writeln!(
+            report,
+            "| {} | {:.4} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.4} | {:.4} | {:.4} |",
+            set.name,
+            objective(&objective_name, m),
+            m.correct,
+            m.gt_regions,
+            m.rg_correct,
+            m.over,
+            m.under,
+            m.f,
+            m.c2_f,
+            m.pp
+        );
+    }
+    let _ = writeln!(
+        report,
+        "\nMeans over the data sets: correct {:.2} of {:.2} GT regions (region growing alone {:.2}), over {:.2}, under {:.2}, boundary F {:.4} (C2 alone {:.4}), paper precision vs C1 {:.4}.",
         bm.correct, bm.gt_regions, bm.rg_correct, bm.over, bm.under, bm.f, bm.c2_f, bm.pp
     );
     for (name, text) in
@@ -317,24 +364,38 @@ fn set_dotted(table: &mut toml::Table, key: &str, value: toml::Value) -> Result<
     Ok(())
 }
 
-/// Reads the training images with their ground truth.
-fn read_images(dataset: &Dataset) -> Result<Vec<Image>> {
-    if dataset.train.is_empty() {
-        bail!("no training images (abw.train.N.range)");
+/// Reads every data set's images with their ground truth.
+fn read_images(sets: &[DataSet]) -> Result<Vec<Image>> {
+    let mut images = Vec::new();
+    for (k, set) in sets.iter().enumerate() {
+        for img in &set.images {
+            let loaded = img.load()?;
+            images.push(Image {
+                set: k,
+                stem: loaded.stem,
+                range: loaded.frame.range,
+                camera: loaded.frame.camera,
+                gt: loaded.gt,
+                angles: loaded.angles,
+            });
+        }
     }
-    dataset
-        .train
-        .iter()
-        .map(|img| {
-            let range = rangeio::abw::read_range(&img.range)?;
-            let gt_path: &PathBuf =
-                img.gt_seg.as_ref().with_context(|| format!("{}: no .gt-seg", img.stem))?;
-            let gt = rangeio::abw::read_labels(gt_path, true)?;
-            let angles = match &img.gt_ang {
-                Some(p) => rangeio::abw::read_angles(p)?.iter().map(|a| (a.a, a.b, a.angle_deg)).collect(),
-                None => Vec::new(),
-            };
-            Ok(Image { stem: img.stem.clone(), range, camera: img.camera, gt, angles })
-        })
-        .collect()
+    Ok(images)
+}
+
+/// The mean of per-image samples, summed in order.
+fn mean_sample(rows: &[&Sample]) -> Sample {
+    let n = rows.len().max(1) as f64;
+    let mut m = Sample::default();
+    for s in rows {
+        m.correct += s.correct / n;
+        m.over += s.over / n;
+        m.under += s.under / n;
+        m.gt_regions += s.gt_regions / n;
+        m.rg_correct += s.rg_correct / n;
+        m.f += s.f / n;
+        m.c2_f += s.c2_f / n;
+        m.pp += s.pp / n;
+    }
+    m
 }

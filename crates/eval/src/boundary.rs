@@ -12,17 +12,29 @@
 //! - **Simple** ([`simple`]): `P` = detected pixels within `τ` of some GT boundary pixel ÷ detected
 //!   pixels; `R` = GT boundary pixels within `τ` of some detected pixel ÷ GT boundary pixels. Many
 //!   detected pixels may be explained by one GT pixel.
-//! - **Matched** ([`matched`]): one-to-one, as in the BSDS benchmark: a maximum-cardinality
-//!   bipartite matching between detected and GT boundary pixels, where a pair may be matched only if
-//!   the two pixels are within `τ`. `P` = matched ÷ detected, `R` = matched ÷ GT. BSDS solves a
-//!   min-cost assignment with an outlier cost; its cardinality is the maximum one, which is all `P`
-//!   and `R` depend on. We compute it with Hopcroft–Karp on the sparse graph of pairs within `τ`
-//!   (deterministic: vertices in raster order, each vertex's candidates nearest first).
+//! - **Matched** ([`matched`]): one-to-one, as in the BSDS benchmark. Both maps are first
+//!   thinned to one-pixel-wide lines with [`thin::thin`] (BSDS thins the machine map with
+//!   `bwmorph(…, 'thin', Inf)`; its GT boundaries are one pixel wide, so our two-pixel GT band is
+//!   thinned the same way), on the whole image, before the don't-care pixels are removed. Then a
+//!   maximum-cardinality bipartite matching between the thinned detected and GT pixels, where a
+//!   pair may be matched only if the two pixels are within `τ`. `P` = matched ÷ detected,
+//!   `R` = matched ÷ GT, both counted after thinning. Without the thinning, two parallel lines
+//!   (C1 beside C2) would match the two sides of the GT band and score as one perfect edge.
+//!   Two consequences: the thinned band keeps one side of the crack (for a straight vertical or
+//!   horizontal one, the left or lower side), so a detection on the other side is matched at up
+//!   to `τ − 1` px of it; and a segmentation's own boundaries ([`label_boundaries`]) hold its
+//!   unlabelled separator pixels, which can move the thinned line near unlabelled GT, so even a
+//!   segmentation equal to the GT may score slightly below 1 there.
+//!   BSDS solves a min-cost assignment with an outlier cost; its cardinality is the maximum one,
+//!   which is all `P` and `R` depend on. We compute it with Hopcroft–Karp on the sparse graph of
+//!   pairs within `τ` (deterministic: vertices in raster order, each vertex's candidates nearest
+//!   first).
 //! - **Conventions** (BSDS `collect_eval_bdry`): a ratio with a zero denominator is 0 (so `P = 0`
 //!   when nothing is detected, `R = 0` when there is no GT boundary), and
 //!   `F = 2PR / (P + R)`, 0 when `P + R = 0`. The counts in [`Prf`] let a caller tell these apart.
 
 use crate::distance::{dilate, edt_squared, radius_squared};
+use crate::thin;
 use rangeimage::{EdgeMap, Grid, LabelImage};
 
 /// Smallest label that names a region in the ABW convention (SPEC §2.1).
@@ -151,6 +163,7 @@ pub fn simple_masked(
 
 /// [`matched`] with an explicit GT boundary map and don't-care mask (`true` = ignore this pixel).
 ///
+/// Both `detected` and `gt_boundary` are thinned ([`thin::thin`]) before the mask is applied.
 /// The mask is used as given (not dilated): pass [`dont_care`] or your own.
 ///
 /// # Panics
@@ -163,7 +176,7 @@ pub fn matched_masked(
 ) -> Prf {
     let _s = tracing::info_span!("eval::boundary::matched").entered();
     let r2 = radius_squared(tolerance_px);
-    let (d, g) = cared(detected, gt_boundary, dont_care);
+    let (d, g) = cared(&thin::thin(detected), &thin::thin(gt_boundary), dont_care);
     let (w, h) = d.dimensions();
     // Right side: GT pixels, indexed in raster order.
     const NIL: u32 = u32::MAX;
@@ -349,10 +362,13 @@ mod tests {
         let gt = two_regions(12, 8, 6);
         let det = gt_boundaries(&gt);
         for tau in [0.0, 1.0, 2.0] {
-            for prf in [simple(&det, &gt, tau), matched(&det, &gt, tau)] {
+            let s = simple(&det, &gt, tau);
+            let m = matched(&det, &gt, tau);
+            for prf in [s, m] {
                 assert_eq!((prf.precision, prf.recall, prf.f), (1.0, 1.0, 1.0));
-                assert_eq!(prf.n_gt, 16);
             }
+            // Simple counts the 2-px band (16 px); matched its thinned line: column 5, rows 1..=7.
+            assert_eq!((s.n_gt, m.n_gt), (16, 7));
         }
     }
 
@@ -360,14 +376,16 @@ mod tests {
     fn nothing_detected_follows_bsds_conventions() {
         let gt = two_regions(6, 4, 3);
         let prf = matched(&Grid::new(6, 4, false), &gt, 2.0);
-        assert_eq!((prf.precision, prf.recall, prf.f, prf.n_detected, prf.n_gt), (0.0, 0.0, 0.0, 0, 8));
+        // The 8-px GT band thins to column 2, rows 1..=3.
+        assert_eq!((prf.precision, prf.recall, prf.f, prf.n_detected, prf.n_gt), (0.0, 0.0, 0.0, 0, 3));
         let one_region = Grid::new(6, 4, 10u32);
         let prf = simple(&Grid::new(6, 4, true), &one_region, 2.0);
         assert_eq!((prf.precision, prf.recall, prf.n_gt, prf.n_detected), (0.0, 0.0, 0, 24));
     }
 
-    /// GT boundary at columns 5|6 of a 12×10 image (20 GT pixels); the detection is the single
-    /// column x = 8, i.e. 2 px right of column 6 and 3 px right of column 5 (10 detected pixels).
+    /// GT boundary at columns 5|6 of a 12×10 image (20 GT pixels; thinned: column 5, rows 1..=9,
+    /// 9 pixels); the detection is the single column x = 8, i.e. 2 px right of column 6 and 3 px
+    /// right of column 5 (10 detected pixels, already thin).
     #[test]
     fn shifted_boundary_by_hand() {
         let gt = two_regions(12, 10, 6);
@@ -376,38 +394,49 @@ mod tests {
         let s = simple(&det, &gt, 1.0);
         assert_eq!((s.n_detected, s.n_detected_matched, s.n_gt, s.n_gt_matched), (10, 0, 20, 0));
         let m = matched(&det, &gt, 1.0);
-        assert_eq!((m.n_detected_matched, m.n_gt_matched), (0, 0));
-        // τ = 2, simple: every detected pixel is 2 px from column 6 → P = 1; only column 6 is
-        // within 2 px of the detection (column 5 is 3 px away) → R = 10 / 20.
+        assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (10, 0, 9, 0));
+        // τ = 2, simple (unthinned band): every detected pixel is 2 px from column 6 → P = 1;
+        // only column 6 is within 2 px of the detection (column 5 is 3 px away) → R = 10 / 20.
         let s = simple(&det, &gt, 2.0);
         assert_eq!((s.n_detected_matched, s.n_gt_matched), (10, 10));
         assert_relative_eq!(s.precision, 1.0);
         assert_relative_eq!(s.recall, 0.5);
         assert_relative_eq!(s.f, 2.0 / 3.0);
-        // τ = 2, matched: each detected pixel takes one column-6 pixel → 10 pairs; same P/R here.
+        // τ = 2, matched: the thinned GT line is column 5, 3 px away → nothing matches.
         let m = matched(&det, &gt, 2.0);
-        assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (10, 10, 20, 10));
-        // τ = 3 separates the two versions: simple R = 1, matched R stays 10 / 20.
+        assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (10, 0, 9, 0));
+        // τ = 3: simple R = 1; matched pairs the 9 GT pixels → P = 9 / 10, R = 1.
         let s = simple(&det, &gt, 3.0);
         let m = matched(&det, &gt, 3.0);
         assert_relative_eq!(s.recall, 1.0);
-        assert_relative_eq!(m.recall, 0.5);
-        assert_relative_eq!(m.precision, 1.0);
+        assert_eq!((m.n_detected_matched, m.n_gt_matched), (9, 9));
+        assert_relative_eq!(m.precision, 0.9);
+        assert_relative_eq!(m.recall, 1.0);
     }
 
-    /// A double detection: columns 5 and 6 detected twice over (columns 4..=7), τ = 1.
+    /// A thick detection (columns 4..=7) thins to one line; two parallel lines stay two.
     #[test]
-    fn thick_detection_by_hand() {
+    fn thick_and_doubled_detections_by_hand() {
         let gt = two_regions(12, 10, 6);
-        let det = Grid::from_fn(12, 10, |x, _| (4..=7).contains(&x));
-        let s = simple(&det, &gt, 1.0);
+        let thick = Grid::from_fn(12, 10, |x, _| (4..=7).contains(&x));
+        let s = simple(&thick, &gt, 1.0);
         assert_eq!((s.n_detected, s.n_detected_matched, s.n_gt, s.n_gt_matched), (40, 40, 20, 20));
-        let m = matched(&det, &gt, 1.0);
-        // Only 20 GT pixels to go round: P = 20 / 40, R = 1.
-        assert_eq!((m.n_detected_matched, m.n_gt_matched), (20, 20));
-        assert_relative_eq!(m.precision, 0.5);
+        // Thinned: column 5, rows 2..=8 (7 px), on the GT's thinned line (column 5, rows 1..=9).
+        let m = matched(&thick, &gt, 1.0);
+        assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (7, 7, 9, 7));
+        assert_relative_eq!(m.precision, 1.0);
+        assert_relative_eq!(m.recall, 7.0 / 9.0);
+        // Two parallel lines, columns 4 and 7 (C1 beside C2, say), τ = 2: each lies within 1 px
+        // of one side of the GT band, so simple scores them perfect; unthinned one-to-one matching
+        // would too (column 4 ↔ 5, column 7 ↔ 6). After thinning, the 9 GT pixels take 9 of the
+        // 20 detected ones: P = 0.45.
+        let doubled = Grid::from_fn(12, 10, |x, _| x == 4 || x == 7);
+        let s = simple(&doubled, &gt, 2.0);
+        assert_eq!((s.precision, s.recall), (1.0, 1.0));
+        let m = matched(&doubled, &gt, 2.0);
+        assert_eq!((m.n_detected, m.n_detected_matched, m.n_gt, m.n_gt_matched), (20, 9, 9, 9));
+        assert_relative_eq!(m.precision, 0.45);
         assert_relative_eq!(m.recall, 1.0);
-        assert_relative_eq!(m.f, 2.0 / 3.0);
     }
 
     #[test]
@@ -499,7 +528,8 @@ mod tests {
                 let det = Grid::from_fn(gt.width(), gt.height(), |x, y| bits[(y * 16 + x) as usize]);
                 let s = simple(&det, &gt, tau);
                 let m = matched(&det, &gt, tau);
-                prop_assert_eq!((s.n_detected, s.n_gt), (m.n_detected, m.n_gt));
+                // Thinning only deletes; a thinned pixel matched within τ is within τ of the GT.
+                prop_assert!(m.n_detected <= s.n_detected && m.n_gt <= s.n_gt);
                 prop_assert!(m.n_detected_matched <= s.n_detected_matched);
                 prop_assert!(m.n_gt_matched <= s.n_gt_matched);
                 prop_assert!(m.n_detected_matched <= m.n_gt.min(m.n_detected));

@@ -1,28 +1,45 @@
 //! Hoover et al. (1996) region metrics, following the rules of the USF `compare` program.
 //!
+//! The rules below are SPEC §3.5 and reproduce `compare.c` of the USF SegComp tools
+//! (`ClassifyRegions`, `ComputeTables`, `OutputTable`) step by step, quirks included.
+//!
 //! # Rules (tolerance `T`, `0.5 < T ≤ 1`)
 //! - **Regions.** GT regions are the labels ≥ 10 (ABW convention: 0..=3 unlabelled, 4..=9
-//!   illegal and ignored). Which labels of the machine segmentation (MS) are regions is set by
-//!   [`Convention`]: ABW (≥ 10), any non-zero label, or auto-detected ([`Convention::Auto`]).
+//!   illegal and ignored; `compare` refuses such files). Which labels of the machine segmentation
+//!   (MS) are regions is set by [`Convention`]: ABW (≥ 10), any non-zero label, or auto-detected
+//!   ([`Convention::Auto`]). Regions are visited in increasing label order, as `compare` visits
+//!   its consecutive labels 10, 11, ….
 //! - **Sizes and overlaps.** `|R|` is the number of pixels carrying the region's label in its own
-//!   image (all of them, wherever the other image is unlabelled). The overlap table `O[m][n]` counts
-//!   the pixels labelled MS region `m` and GT region `n`, over all pixels.
-//! - **Correct detection** of GT `n` by MS `m`: `O ≥ T·|m|` and `O ≥ T·|n|`.
-//! - **Over-segmentation** of GT `n` into MS `m1..mx`, `x ≥ 2`: every `O[mi][n] ≥ T·|mi|` and
-//!   `Σ O[mi][n] ≥ T·|n|`. The set is all not-yet-classified MS regions with `O[m][n] ≥ T·|m|`.
-//! - **Under-segmentation** of MS `m` into GT `n1..nx`, `x ≥ 2`: every `O[m][ni] ≥ T·|ni|` and
-//!   `Σ O[m][ni] ≥ T·|m|`, the set again being all not-yet-classified candidates.
-//! - **Precedence.** A region belongs to at most one category. As in `compare`, all correct
-//!   detections are found first, then over-segmentations among the regions left, then
-//!   under-segmentations among the regions left; GT regions left are **missed**, MS regions left
-//!   are **noise**.
-//! - **Counts.** `correct` = correctly detected pairs; `over` = over-segmented GT regions (instances);
-//!   `under` = under-segmenting MS regions (instances); `missed` = GT regions; `noise` = MS regions.
-//! - **Angle error.** For every adjacent GT pair `(a, b, angle)` listed in the `.gt-ang` data whose
-//!   two regions are both correctly detected, by MS regions `ma ≠ mb` that both have a normal in the
-//!   `.ms-nor` data: `|angle − ∠(n_ma, n_mb)|`, with `∠` = `acos` of the normalised dot product in
-//!   degrees (normals as given, no sign flipping). Mean and population standard deviation over those
-//!   pairs, in list order; `None` when the data are missing or no pair qualifies.
+//!   image, over all pixels (MS pixels on GT labels 0..=3 still count in `|m|`, GT pixels under
+//!   unlabelled MS pixels in `|n|`). `O[m][n]` counts the pixels labelled MS `m` and GT `n`. A ratio
+//!   "`O / |R| ≥ T`" is evaluated as `compare` does, as a floating-point quotient compared with `T`.
+//! - **Step 1, correct detections.** Every pair with `O/|n| ≥ T` and `O/|m| ≥ T` is classified
+//!   correct; `n` and `m` are mapped to each other, and both remember the pair's two ratios.
+//! - **Step 2, over-segmentation**, for each GT `n`: the candidates are *all* MS regions `m`
+//!   (classified or not) with `O[m][n]/|m| ≥ T`, and every candidate is re-mapped to `n` at once,
+//!   whether or not an over-segmentation is then declared (a quirk of `compare`; with `T > 0.5` a
+//!   region is a candidate of at most one other region, so the quirk shows in the mappings, never
+//!   in a count). With ≥ 2 candidates, ratios `Σ O / |n| ≥ T` and `Σ O / Σ |m| ≥ T`, `n` and every
+//!   MS region mapped to `n` become over-segmentation — **unless `n` is already classified and the
+//!   mean of the two new ratios is ≤ the mean of its current two**. Only `n`'s current ratios are
+//!   compared, as in `compare`.
+//! - **Step 3, under-segmentation**, for each MS `m`: symmetric (candidates: all GT `n` with
+//!   `O[m][n]/|n| ≥ T`, re-mapped to `m`; ≥ 2 of them; `Σ O / Σ |n| ≥ T` and `Σ O / |m| ≥ T`;
+//!   replaces `m`'s current classification only if the new mean is higher; then every GT region
+//!   mapped to `m` becomes under-segmentation). A replaced over-segmentation can leave MS pieces
+//!   classified over-segmentation whose GT region no longer is, exactly as in `compare`.
+//! - **Step 4.** GT regions left unclassified are **missed**, MS regions left are **noise**.
+//! - **Counts.** `correct` = GT regions classified correct; `over` = GT regions classified
+//!   over-segmentation; `under` = MS regions classified under-segmentation; `missed` = GT regions;
+//!   `noise` = MS regions.
+//! - **Angle error** (`compare`'s `OutputTable`). For each correctly detected GT region `a`, by
+//!   increasing label, and each entry `(a, b, angle)` of the `.gt-ang` list (in list order) whose
+//!   `b` is correctly detected too: the GT angle is folded to `|angle − 180|` when above 90°, the
+//!   MS angle is `acos(|cos|)` of the two mapped regions' normals (so in 0..=90°), and the error is
+//!   their absolute difference. Mean and population standard deviation over those pairs; `None`
+//!   when the data are missing or no pair qualifies. Where `compare` would read an undefined
+//!   normal (an MS region missing from the `.ms-nor` list, or a zero normal) the pair is skipped;
+//!   if a label is listed twice, the last entry wins, as in `compare`.
 
 use crate::boundary::FIRST_REGION_LABEL;
 use rangeimage::LabelImage;
@@ -100,6 +117,12 @@ pub struct Classification {
     pub seg: Vec<(u32, Category)>,
     /// `(gt_label, seg_label)` of every correct detection, by increasing GT label.
     pub correct_pairs: Vec<(u32, u32)>,
+    /// `(gt_label, seg_label)`: the MS region each GT region was last mapped to (`compare`'s
+    /// `GTRegionMappings`), by increasing GT label; `None` if never mapped.
+    pub gt_mapping: Vec<(u32, Option<u32>)>,
+    /// `(seg_label, gt_label)`: the GT region each MS region was last mapped to (`compare`'s
+    /// `MSRegionMappings`), by increasing MS label; `None` if never mapped.
+    pub seg_mapping: Vec<(u32, Option<u32>)>,
 }
 
 /// The Hoover et al. scores of one segmentation at one tolerance.
@@ -266,63 +289,101 @@ impl Overlap {
     /// If `t` is not in `(0.5, 1]`.
     pub fn classify(&self, t: f64) -> Classification {
         assert!(t > 0.5 && t <= 1.0, "Hoover tolerance T must be in (0.5, 1], got {t}");
-        let at_least = |o: u64, size: u64| o as f64 >= t * size as f64;
-        let mut gt_cat: Vec<Option<Category>> = vec![None; self.gt_labels.len()];
-        let mut seg_cat: Vec<Option<Category>> = vec![None; self.seg_labels.len()];
-        let mut correct_pairs = Vec::new();
+        // `compare` divides and compares the quotient with T (`Measure >= T_SEG`); so do we, so
+        // that ties at the threshold fall the same way.
+        let ratio = |o: u64, size: u64| o as f64 / size as f64;
+        let (n_gt, n_seg) = (self.gt_labels.len(), self.seg_labels.len());
+        let mut gt_cat: Vec<Option<Category>> = vec![None; n_gt];
+        let mut seg_cat: Vec<Option<Category>> = vec![None; n_seg];
+        let mut gt_map: Vec<Option<usize>> = vec![None; n_gt];
+        let mut seg_map: Vec<Option<usize>> = vec![None; n_seg];
+        // The two ratios of each region's current classification (`*MappingMeasures`).
+        let mut gt_measures = vec![[0.0f64; 2]; n_gt];
+        let mut seg_measures = vec![[0.0f64; 2]; n_seg];
+        let mean = |m: [f64; 2]| (m[0] + m[1]) / 2.0;
+        // Step 1: correct detections. With T > 0.5 a region passes with at most one partner.
         for (g, row) in self.by_gt.iter().enumerate() {
             for &(s, o) in row {
                 let s = s as usize;
-                if gt_cat[g].is_none()
-                    && seg_cat[s].is_none()
-                    && at_least(o, self.gt_sizes[g])
-                    && at_least(o, self.seg_sizes[s])
-                {
+                let m = [ratio(o, self.gt_sizes[g]), ratio(o, self.seg_sizes[s])];
+                if m[0] >= t && m[1] >= t {
                     gt_cat[g] = Some(Category::Correct);
                     seg_cat[s] = Some(Category::Correct);
-                    correct_pairs.push((self.gt_labels[g], self.seg_labels[s]));
+                    gt_map[g] = Some(s);
+                    seg_map[s] = Some(g);
+                    gt_measures[g] = m;
+                    seg_measures[s] = m;
                 }
             }
         }
+        // Step 2: over-segmentation of each GT region, replacing a worse classification.
         for (g, row) in self.by_gt.iter().enumerate() {
-            if gt_cat[g].is_some() {
+            let (mut count, mut total_overlap, mut total_area) = (0usize, 0u64, 0u64);
+            for &(s, o) in row {
+                let s = s as usize;
+                if ratio(o, self.seg_sizes[s]) >= t {
+                    count += 1;
+                    total_overlap += o;
+                    total_area += self.seg_sizes[s];
+                    // The quirk: re-mapped whether or not an over-segmentation is declared.
+                    seg_map[s] = Some(g);
+                }
+            }
+            if count < 2 {
                 continue;
             }
-            let pieces: Vec<(usize, u64)> = row
-                .iter()
-                .map(|&(s, o)| (s as usize, o))
-                .filter(|&(s, o)| seg_cat[s].is_none() && at_least(o, self.seg_sizes[s]))
-                .collect();
-            let sum: u64 = pieces.iter().map(|p| p.1).sum();
-            if pieces.len() >= 2 && at_least(sum, self.gt_sizes[g]) {
+            let m = [ratio(total_overlap, self.gt_sizes[g]), ratio(total_overlap, total_area)];
+            if m[0] >= t && m[1] >= t && (gt_cat[g].is_none() || mean(m) > mean(gt_measures[g])) {
                 gt_cat[g] = Some(Category::Over);
-                for &(s, _) in &pieces {
+                gt_measures[g] = m;
+                for s in (0..n_seg).filter(|&s| seg_map[s] == Some(g)) {
                     seg_cat[s] = Some(Category::Over);
+                    seg_measures[s] = m;
                 }
             }
         }
+        // Step 3: under-segmentation by each MS region, replacing a worse classification of it.
         for (s, col) in self.by_seg.iter().enumerate() {
-            if seg_cat[s].is_some() {
+            let (mut count, mut total_overlap, mut total_area) = (0usize, 0u64, 0u64);
+            for &(g, o) in col {
+                let g = g as usize;
+                if ratio(o, self.gt_sizes[g]) >= t {
+                    count += 1;
+                    total_overlap += o;
+                    total_area += self.gt_sizes[g];
+                    gt_map[g] = Some(s);
+                }
+            }
+            if count < 2 {
                 continue;
             }
-            let pieces: Vec<(usize, u64)> = col
-                .iter()
-                .map(|&(g, o)| (g as usize, o))
-                .filter(|&(g, o)| gt_cat[g].is_none() && at_least(o, self.gt_sizes[g]))
-                .collect();
-            let sum: u64 = pieces.iter().map(|p| p.1).sum();
-            if pieces.len() >= 2 && at_least(sum, self.seg_sizes[s]) {
+            let m = [ratio(total_overlap, total_area), ratio(total_overlap, self.seg_sizes[s])];
+            if m[0] >= t && m[1] >= t && (seg_cat[s].is_none() || mean(m) > mean(seg_measures[s])) {
                 seg_cat[s] = Some(Category::Under);
-                for &(g, _) in &pieces {
+                seg_measures[s] = m;
+                for g in (0..n_gt).filter(|&g| gt_map[g] == Some(s)) {
                     gt_cat[g] = Some(Category::Under);
+                    gt_measures[g] = m;
                 }
             }
         }
+        // Step 4: the rest.
+        let correct_pairs = (0..n_gt)
+            .filter(|&g| gt_cat[g] == Some(Category::Correct))
+            .map(|g| {
+                let s = gt_map[g].expect("a correct GT region is mapped to its MS region");
+                (self.gt_labels[g], self.seg_labels[s])
+            })
+            .collect();
         let gt =
             self.gt_labels.iter().zip(&gt_cat).map(|(&l, c)| (l, c.unwrap_or(Category::Missed))).collect();
         let seg =
             self.seg_labels.iter().zip(&seg_cat).map(|(&l, c)| (l, c.unwrap_or(Category::Noise))).collect();
-        Classification { t, gt, seg, correct_pairs }
+        let gt_mapping =
+            self.gt_labels.iter().zip(&gt_map).map(|(&l, m)| (l, m.map(|s| self.seg_labels[s]))).collect();
+        let seg_mapping =
+            self.seg_labels.iter().zip(&seg_map).map(|(&l, m)| (l, m.map(|g| self.gt_labels[g]))).collect();
+        Classification { t, gt, seg, correct_pairs, gt_mapping, seg_mapping }
     }
 
     /// Scores at tolerance `t`, with the angle error when both angle lists are given.
@@ -337,25 +398,24 @@ impl Overlap {
     ) -> HooverScore {
         let c = self.classify(t);
         let count = |v: &[(u32, Category)], cat: Category| v.iter().filter(|e| e.1 == cat).count() as u32;
-        let under = count(&c.seg, Category::Under);
-        let over = count(&c.gt, Category::Over);
         let mut errors = Vec::new();
         if let (Some(angles), Some(normals)) = (gt_angles, seg_normals) {
-            // `correct_pairs` is sorted by GT label; normals: the first entry of a label wins.
-            let mut normal_of: HashMap<u32, [f32; 3]> = HashMap::new();
-            for &(l, n) in normals {
-                normal_of.entry(l).or_insert(n);
-            }
+            // As `compare` reads `.ms-nor`: a later entry of a label overwrites an earlier one.
+            let normal_of: HashMap<u32, [f32; 3]> = normals.iter().copied().collect();
+            // `correct_pairs` is sorted by GT label.
             let seg_of =
                 |g: u32| c.correct_pairs.binary_search_by_key(&g, |p| p.0).ok().map(|i| c.correct_pairs[i].1);
-            for &(a, b, gt_angle) in angles {
-                let (Some(ma), Some(mb)) = (seg_of(a), seg_of(b)) else { continue };
-                let (Some(na), Some(nb)) = (normal_of.get(&ma), normal_of.get(&mb)) else { continue };
-                if ma == mb || !gt_angle.is_finite() {
-                    continue;
-                }
-                if let Some(ms_angle) = angle_deg(*na, *nb) {
-                    errors.push((gt_angle - ms_angle).abs());
+            for &(a, ma) in &c.correct_pairs {
+                for &(_, b, gt_angle) in angles.iter().filter(|e| e.0 == a) {
+                    let Some(mb) = seg_of(b) else { continue };
+                    let (Some(na), Some(nb)) = (normal_of.get(&ma), normal_of.get(&mb)) else { continue };
+                    if !gt_angle.is_finite() {
+                        continue;
+                    }
+                    let gt_angle = if gt_angle > 90.0 { (gt_angle - 180.0).abs() } else { gt_angle };
+                    if let Some(ms_angle) = ms_angle_deg(*na, *nb) {
+                        errors.push((gt_angle - ms_angle).abs());
+                    }
                 }
             }
         }
@@ -371,9 +431,9 @@ impl Overlap {
             t,
             gt_regions: self.gt_labels.len() as u32,
             seg_regions: self.seg_labels.len() as u32,
-            correct: c.correct_pairs.len() as u32,
-            over,
-            under,
+            correct: count(&c.gt, Category::Correct),
+            over: count(&c.gt, Category::Over),
+            under: count(&c.seg, Category::Under),
             missed: count(&c.gt, Category::Missed),
             noise: count(&c.seg, Category::Noise),
             over_seg_regions: count(&c.seg, Category::Over),
@@ -385,15 +445,30 @@ impl Overlap {
     }
 }
 
-/// Angle between two vectors in degrees; `None` if either is zero or not finite.
-fn angle_deg(a: [f32; 3], b: [f32; 3]) -> Option<f64> {
-    let a = a.map(f64::from);
-    let b = b.map(f64::from);
+/// Angle between two MS normals in degrees, as `compare` computes it: each normal is flipped to
+/// `z ≥ 0` when read, then `acos(|cos|)` if `|cos| < 1`, 0° if `cos ≥ 1`, 180° if `cos ≤ −1` (so
+/// 0..=90° except for exactly opposite normals with `z = 0`). `None` if either is zero or not finite.
+fn ms_angle_deg(a: [f32; 3], b: [f32; 3]) -> Option<f64> {
+    let flip = |v: [f32; 3]| {
+        let v = v.map(f64::from);
+        if v[2] < 0.0 { v.map(|x| -x) } else { v }
+    };
+    let (a, b) = (flip(a), flip(b));
     let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
     let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
     let c = dot / (na * nb);
-    (c.is_finite() && na > 0.0 && nb > 0.0).then(|| c.clamp(-1.0, 1.0).acos().to_degrees())
+    if !(c.is_finite() && na > 0.0 && nb > 0.0) {
+        return None;
+    }
+    let angle = if c.abs() < 1.0 {
+        c.abs().acos()
+    } else if c >= 1.0 {
+        0.0
+    } else {
+        std::f64::consts::PI
+    };
+    Some(angle.to_degrees())
 }
 
 /// Hoover scores of `seg` against `gt` at tolerance `t` (MS convention auto-detected).
@@ -489,18 +564,174 @@ mod tests {
         assert_eq!(s.under_gt_regions, 2);
     }
 
+    /// One row: `(label, run length)` pairs laid end to end.
+    fn runs(r: &[(u32, usize)]) -> LabelImage {
+        img(&[&r.iter().flat_map(|&(l, n)| std::iter::repeat_n(l, n)).collect::<Vec<u32>>()])
+    }
+
+    fn category_of(v: &[(u32, Category)], label: u32) -> Category {
+        v.iter().find(|e| e.0 == label).expect("label present").1
+    }
+
+    #[test]
+    fn under_segmentation_replaces_a_worse_correct_detection() {
+        // SPEC §3.5's example. GT A = 10 (90 px) and B = 11 (10 px), merged into MS M = 20
+        // (100 px). Step 1: A–M correct (90/90 = 1, 90/100 = 0.9, mean 0.95). Step 3: M
+        // under-segments A and B (100/100 and 100/100, mean 1.0 > 0.95) and replaces it.
+        let gt = runs(&[(10, 90), (11, 10)]);
+        let seg = runs(&[(20, 100)]);
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [0, 0, 1, 0, 0]);
+        assert_eq!((s.under_gt_regions, s.over_seg_regions), (2, 0));
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.gt, vec![(10, Category::Under), (11, Category::Under)]);
+        assert_eq!(c.seg, vec![(20, Category::Under)]);
+        assert!(c.correct_pairs.is_empty());
+        assert_eq!(c.gt_mapping, vec![(10, Some(20)), (11, Some(20))]);
+    }
+
+    #[test]
+    fn under_segmentation_does_not_replace_a_better_correct_detection() {
+        // T = 0.51. GT A = 10 (100 px) lies in MS M = 20 (150 px), which also holds 11 of the
+        // 20 px of GT B = 11 and 39 px of unlabelled GT; B's other 9 px are unlabelled in the MS.
+        // Step 1: A–M correct (100/100, 100/150: mean 0.83333). Step 3: M under-segments A and B
+        // (111/120, 111/150: mean 0.8325), lower → the correct detection stays and B is missed.
+        let gt = runs(&[(10, 100), (11, 11), (0, 39), (11, 9)]);
+        let seg = runs(&[(20, 150), (0, 9)]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.51);
+        assert_eq!(c.gt, vec![(10, Category::Correct), (11, Category::Missed)]);
+        assert_eq!(c.seg, vec![(20, Category::Correct)]);
+        // B was still re-mapped to M in step 3.
+        assert_eq!(c.gt_mapping, vec![(10, Some(20)), (11, Some(20))]);
+        assert_eq!(counts(&compare(&gt, &seg, 0.51, None, None)), [1, 0, 0, 1, 0]);
+        // With 6 more px of B inside M (17 of 20, M = 156): 117/120 and 117/156 (mean 0.8625)
+        // beat 100/100 and 100/156 (mean 0.8205): the under-segmentation replaces it.
+        let gt = runs(&[(10, 100), (11, 17), (0, 39), (11, 3)]);
+        let seg = runs(&[(20, 156), (0, 3)]);
+        assert_eq!(counts(&compare(&gt, &seg, 0.51, None, None)), [0, 0, 1, 0, 0]);
+    }
+
+    #[test]
+    fn correct_detections_only() {
+        // Two GT regions, each found by one MS region that spills 2 px over the border.
+        let gt = runs(&[(10, 20), (11, 20)]);
+        let seg = runs(&[(20, 22), (21, 18)]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.correct_pairs, vec![(10, 20), (11, 21)]);
+        assert_eq!(counts(&compare(&gt, &seg, 0.8, None, None)), [2, 0, 0, 0, 0]);
+        // At T = 0.95: 20/22 < 0.95, so 10 and 20 fail; 11–21 (18/20 = 0.9) fails too.
+        assert_eq!(counts(&compare(&gt, &seg, 0.95, None, None)), [0, 0, 0, 2, 2]);
+    }
+
+    #[test]
+    fn over_segmentation_replaces_a_worse_correct_detection() {
+        // GT 10 (100 px) = MS 20 (85 px) + MS 21 (15 px). Step 1: 10–20 correct (0.85 and 1.0,
+        // mean 0.925). Step 2: over-segmentation with ratios 100/100 and 100/100 (mean 1.0).
+        let gt = runs(&[(10, 100)]);
+        let seg = runs(&[(20, 85), (21, 15)]);
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [0, 1, 0, 0, 0]);
+        assert_eq!(s.over_seg_regions, 2);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.seg, vec![(20, Category::Over), (21, Category::Over)]);
+        assert!(c.correct_pairs.is_empty());
+    }
+
+    #[test]
+    fn over_segmentation_does_not_replace_an_equal_or_better_correct_detection() {
+        // T = 0.51. GT 10 (32 px) = MS 20 (17 px) + MS 21 (4 of its 7 px) + 11 px unlabelled.
+        // Correct 10–20: 17/32 and 17/17, mean 0.765625. Over-segmentation {20, 21}: 21/32 and
+        // 21/24, mean 0.765625 — equal (all exact binary fractions), so the correct detection stays.
+        let gt = runs(&[(10, 32), (0, 3)]);
+        let seg = runs(&[(20, 17), (21, 4), (0, 11), (21, 3)]);
+        let s = compare(&gt, &seg, 0.51, None, None);
+        assert_eq!(counts(&s), [1, 0, 0, 0, 1]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.51);
+        assert_eq!(c.correct_pairs, vec![(10, 20)]);
+        // The re-mapping quirk: 21 was re-mapped to 10 in step 2 although it ends up noise.
+        assert_eq!(c.seg_mapping, vec![(20, Some(10)), (21, Some(10))]);
+        assert_eq!(category_of(&c.seg, 21), Category::Noise);
+        // Lower: GT 10 (31 px) = 20 (16 px) + 21 (4 of 7) + 11 unlabelled. Correct: 16/31 and 1
+        // (mean 0.75806); over: 20/31 and 20/23 (mean 0.75736) → the correct detection stays.
+        let gt = runs(&[(10, 31), (0, 3)]);
+        let seg = runs(&[(20, 16), (21, 4), (0, 11), (21, 3)]);
+        assert_eq!(counts(&compare(&gt, &seg, 0.51, None, None)), [1, 0, 0, 0, 1]);
+        // Higher: one unlabelled pixel of 10 given to 21 (GT 10 = 20 + 5 of 8 + 10 unlabelled).
+        // Correct: 16/31, 1 (mean 0.75806); over: 21/31 and 21/24 (mean 0.77621) → replaced.
+        let seg = runs(&[(20, 16), (21, 5), (0, 10), (21, 3)]);
+        let s = compare(&gt, &seg, 0.51, None, None);
+        assert_eq!(counts(&s), [0, 1, 0, 0, 0]);
+        assert_eq!(s.over_seg_regions, 2);
+    }
+
+    #[test]
+    fn remapping_quirk_without_any_instance() {
+        // MS 21 lies inside GT 11 (30 of its 100 px; the rest is unlabelled in the MS): 21 is
+        // re-mapped to 11 in step 2 although 11 has a single candidate, so no over-segmentation.
+        let gt = runs(&[(10, 20), (11, 100)]);
+        let seg = runs(&[(20, 20), (21, 30), (0, 70)]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.gt, vec![(10, Category::Correct), (11, Category::Missed)]);
+        assert_eq!(c.seg, vec![(20, Category::Correct), (21, Category::Noise)]);
+        assert_eq!(c.seg_mapping, vec![(20, Some(10)), (21, Some(11))]);
+        assert_eq!(c.gt_mapping, vec![(10, Some(20)), (11, None)]);
+    }
+
+    #[test]
+    fn under_segmentation_replacing_an_over_segmentation_orphans_its_other_piece() {
+        // GT 10 (90 px), GT 11 (15 px); MS 21 = 10 px of 10, MS 20 = 80 px of 10 + all of 11.
+        // Step 1: 10–20 correct (80/90, 80/95: mean 0.865). Step 2: 10 over-segmented into
+        // {20, 21} (90/90, 90/105: mean 0.929) replaces it. Step 3: 20 under-segments {10, 11}
+        // (95/105, 95/95: mean 0.952 > 0.929) and replaces 20's over-segmentation; 10 and 11
+        // become under-segmented, and 21 stays an over-segmentation piece of nothing counted.
+        let gt = runs(&[(10, 90), (11, 15)]);
+        let seg = runs(&[(21, 10), (20, 95)]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.gt, vec![(10, Category::Under), (11, Category::Under)]);
+        assert_eq!(c.seg, vec![(20, Category::Under), (21, Category::Over)]);
+        let s = compare(&gt, &seg, 0.8, None, None);
+        assert_eq!(counts(&s), [0, 0, 1, 0, 0]);
+        assert_eq!((s.over_seg_regions, s.under_gt_regions), (1, 2));
+    }
+
     #[test]
     fn missed_and_noise() {
         let gt = blocks(&[&[10, 10, 10, 10], &[10, 10, 10, 11], &[0, 0, 12, 12]], 4);
         let seg = blocks(&[&[30, 30, 30, 30], &[30, 30, 30, 30], &[31, 31, 32, 32]], 4);
-        // |10| = 112, |11| = 16, |30| = 128, O(30,10) = 112 ≥ 0.8·128 = 102.4 and ≥ 0.8·112 → correct.
-        // 11 lies entirely in 30, which is already correct → missed. 31 lies on unlabelled GT → noise.
+        // |10| = 112, |11| = 16, |30| = 128: 30 is a correct detection of 10 (112/112, 112/128,
+        // mean 0.9375), replaced in step 3 by its under-segmentation of 10 and 11 (128/128 and
+        // 128/128). 31 lies on unlabelled GT → noise. (Before `compare`'s replacement rule was
+        // followed, this test expected 10 correct and 11 missed.)
         let s = compare(&gt, &seg, 0.8, None, None);
-        assert_eq!(counts(&s), [2, 0, 0, 1, 1]);
-        // At T = 0.9, 30 is no longer a correct detection of 10 (112 < 115.2): it under-segments
-        // 10 and 11 (both entirely inside it, sum 128 ≥ 115.2).
+        assert_eq!(counts(&s), [1, 0, 1, 0, 1]);
+        // At T = 0.9, 30 is no longer a correct detection of 10 (112/128 < 0.9): the same.
         let s = compare(&gt, &seg, 0.9, None, None);
         assert_eq!(counts(&s), [1, 0, 1, 0, 1]);
+        // A GT region under unlabelled MS pixels is missed; an MS region on unlabelled GT is noise.
+        let gt = runs(&[(10, 10), (11, 10), (0, 10)]);
+        let seg = runs(&[(20, 10), (0, 10), (21, 10)]);
+        let c = Overlap::new(&gt, &seg, Convention::Auto).classify(0.8);
+        assert_eq!(c.gt, vec![(10, Category::Correct), (11, Category::Missed)]);
+        assert_eq!(c.seg, vec![(20, Category::Correct), (21, Category::Noise)]);
+    }
+
+    #[test]
+    fn unlabelled_pixels_count_in_region_sizes() {
+        // MS 20 covers GT 10 (10 px) and 3 px of GT label 0..=3: |20| = 13 counts them all,
+        // so 10/13 = 0.769 < 0.8: not correct (10 missed, 20 noise); correct at T = 0.75.
+        for unlabelled in 0..=3 {
+            let gt = runs(&[(10, 10), (unlabelled, 3)]);
+            let seg = runs(&[(20, 13)]);
+            assert_eq!(counts(&compare(&gt, &seg, 0.8, None, None)), [0, 0, 0, 1, 1]);
+            assert_eq!(counts(&compare(&gt, &seg, 0.75, None, None)), [1, 0, 0, 0, 0]);
+        }
+        // MS labels 1..=3 (ABW convention) are not regions but their pixels count in |GT 10|:
+        // 20 covers 7 of its 10 px → 0.7.
+        let gt = runs(&[(10, 10)]);
+        let seg = runs(&[(20, 7), (1, 1), (2, 1), (3, 1)]);
+        let s = compare(&gt, &seg, 0.7, None, None);
+        assert_eq!((s.seg_regions, counts(&s)), (1, [1, 0, 0, 0, 0]));
+        assert_eq!(counts(&compare(&gt, &seg, 0.71, None, None)), [0, 0, 0, 1, 1]);
     }
 
     #[test]
@@ -548,6 +779,27 @@ mod tests {
         let s = compare(&gt, &seg, 0.8, Some(&angles), Some(&normals[..2]));
         assert_eq!(s.angle_pairs, 1);
         assert_relative_eq!(s.angle_error_deg.unwrap(), 0.0, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn angle_error_folds_like_compare() {
+        let gt = blocks(&[&[10, 11]], 4);
+        let seg = blocks(&[&[20, 21]], 4);
+        // Normals 120° apart (one has z < 0, flipped on reading): `compare` measures 60°.
+        let c120 = [-0.5f32, 0.0, -(3f32.sqrt()) / 2.0];
+        let normals = [(20, [1.0f32, 0.0, 0.0]), (21, c120)];
+        // A GT angle of 120° is folded to 60°: error 0. A GT angle of 50°: error 10.
+        for (gt_angle, err) in [(120.0, 0.0), (60.0, 0.0), (50.0, 10.0), (130.0, 10.0)] {
+            let s = compare(&gt, &seg, 0.8, Some(&[(10, 11, gt_angle)]), Some(&normals));
+            assert_eq!(s.angle_pairs, 1);
+            assert_relative_eq!(s.angle_error_deg.unwrap(), err, epsilon = 1e-4);
+        }
+        // A later normal of the same label replaces an earlier one; a zero normal drops the pair.
+        let twice = [(20, [0.0f32, 1.0, 0.0]), (20, [1.0, 0.0, 0.0]), (21, c120)];
+        let s = compare(&gt, &seg, 0.8, Some(&[(10, 11, 60.0)]), Some(&twice));
+        assert_relative_eq!(s.angle_error_deg.unwrap(), 0.0, epsilon = 1e-4);
+        let zero = [(20, [0.0f32; 3]), (21, c120)];
+        assert_eq!(compare(&gt, &seg, 0.8, Some(&[(10, 11, 60.0)]), Some(&zero)).angle_pairs, 0);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! This crate does no I/O and depends on no math or image crate, so every stage can use it.
 
 mod camera;
+pub mod distance;
 mod grid;
 mod types;
 

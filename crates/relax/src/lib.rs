@@ -51,14 +51,13 @@
 //! energy_before` always.
 
 mod anneal;
-mod edt;
 mod segment;
 
 pub use segment::{SegmentMode, SegmentParams, final_segmentation};
 
 use anneal::{DistanceTerm, NONE, State};
 use rand::SeedableRng;
-use rangeimage::{EdgeMap, Grid};
+use rangeimage::{EdgeMap, Grid, distance};
 
 /// The `[relax]` table: pruning distance, energy weight and annealing schedule.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -246,7 +245,7 @@ fn within(query: &EdgeMap, mask: &EdgeMap, t_px: f64) -> EdgeMap {
             *word = chunk.iter().enumerate().fold(0u64, |acc, (j, &b)| acc | (u64::from(b) << j));
         }
     }
-    let rx = edt::reach(t_px);
+    let rx = distance::reach(t_px);
     let r = rx.len() - 1;
     // Whether row `y` of `bits` has a set bit in columns lo..=hi.
     let any = |y: usize, lo: usize, hi: usize| {
@@ -364,7 +363,7 @@ pub fn energy(
     let magn = scaled(magnitude, c2_initial, params.normalize);
     let ab = external_sum(c1_initial, &s1n, c2_initial, &magn);
     let term = DistanceTerm::new(params.distance_cap_px());
-    let d = edt::squared_edt(c2);
+    let d = distance::edt_squared(c2);
     let mut internal = 0.0;
     for (&e, &d2) in c1.as_slice().iter().zip(d.as_slice()) {
         if e {
@@ -642,11 +641,11 @@ mod tests {
             let c = random_case(200, 23, 70 + seed);
             for t_d in [0.0, 1.0, 9.5, 20.0, 63.2, 64.0] {
                 let (p1, p2) = prune(&c.c1, &c.c2, t_d);
-                let d1 = edt::squared_edt(&c.c1);
+                let d1 = distance::edt_squared(&c.c1);
                 let want2 = Grid::from_fn(c.c2.width(), c.c2.height(), |x, y| {
                     c.c2[(x, y)] && d1[(x, y)] <= t_d * t_d
                 });
-                let d2 = edt::squared_edt(&want2);
+                let d2 = distance::edt_squared(&want2);
                 let want1 = Grid::from_fn(c.c1.width(), c.c1.height(), |x, y| {
                     c.c1[(x, y)] && d2[(x, y)] <= t_d * t_d
                 });
@@ -670,10 +669,10 @@ mod tests {
             for t_d in [0.0, 1.0, 1.5, 2.9, 4.0, 7.3] {
                 let (p1, p2) = prune(&c.c1, &c.c2, t_d);
                 let t2 = t_d * t_d;
-                let d1 = edt::squared_edt(&c.c1);
+                let d1 = distance::edt_squared(&c.c1);
                 let want2 =
                     Grid::from_fn(c.c2.width(), c.c2.height(), |x, y| c.c2[(x, y)] && d1[(x, y)] <= t2);
-                let d2 = edt::squared_edt(&want2);
+                let d2 = distance::edt_squared(&want2);
                 let want1 =
                     Grid::from_fn(c.c1.width(), c.c1.height(), |x, y| c.c1[(x, y)] && d2[(x, y)] <= t2);
                 assert_eq!(p2, want2, "seed {seed}, t_d {t_d}");
@@ -705,7 +704,7 @@ mod tests {
         assert_relative_eq!(e.internal, info.e_internal_after, epsilon = 1e-9, max_relative = 1e-9);
         let e0 = energy(&p1, &c.s1, &p2, &c.mag, &p1, &p2, &params);
         assert_relative_eq!(e0.total, info.energy_before, epsilon = 1e-9, max_relative = 1e-9);
-        let d1 = edt::squared_edt(&p1);
+        let d1 = distance::edt_squared(&p1);
         let s2 = params.support_px * params.support_px;
         assert!(params.support_px > 0.0);
         let mut unsupported = 0;

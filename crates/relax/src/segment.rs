@@ -268,7 +268,7 @@ pub fn final_segmentation(
     let r = range.as_slice();
     // Core pixels: valid, not an edge pixel and not within gap_close_px of one.
     let mut core: Vec<bool> = if params.gap_close_px > 0.0 {
-        crate::edt::near(edges, params.gap_close_px)
+        rangeimage::distance::within(edges, params.gap_close_px).into_vec()
     } else {
         edges.as_slice().to_vec()
     };

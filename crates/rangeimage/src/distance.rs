@@ -1,16 +1,17 @@
-//! Exact squared Euclidean distance transform of a binary mask (Felzenszwalb & Huttenlocher, 2012).
+//! Exact Euclidean distance transforms of binary masks, and "within τ" tests.
+//!
+//! Shared by the relaxation (pruning, support tests, energies) and the evaluation (tolerances τ), so that every
+//! "within τ pixels" in the workspace is the same test: Euclidean distance between pixel centres ≤ τ, inclusive.
 
-use rangeimage::Grid;
+use crate::Grid;
 
-/// Squared distance assigned to pixels when the mask has no feature pixel at all.
-pub(crate) const FAR: f64 = 1e20;
-
-/// For every pixel, the squared Euclidean distance (in pixels²) to the nearest `true` pixel of
-/// `mask`, or [`FAR`] if the mask is empty. Finite values are exact integers.
+/// For every pixel, the squared Euclidean distance (in pixels², between pixel centres) to the nearest `true` pixel
+/// of `mask`: `0.0` on `true` pixels, `f64::INFINITY` everywhere if the mask is empty. Finite values are exact
+/// integers (a 4-neighbour is at 1, a diagonal neighbour at 2), not an approximation (chamfer, 3×3 passes, …).
 ///
 /// Separable: an exact 1D distance along each column (two linear sweeps, binary input), then the
 /// lower envelope of parabolas along each row. O(width · height).
-pub(crate) fn squared_edt(mask: &Grid<bool>) -> Grid<f64> {
+pub fn edt_squared(mask: &Grid<bool>) -> Grid<f64> {
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let m = mask.as_slice();
     // Pass 1: per column, vertical distance to the nearest feature, by a downward and an upward
@@ -38,19 +39,20 @@ pub(crate) fn squared_edt(mask: &Grid<bool>) -> Grid<f64> {
             cur[x] = cur[x].min(next[x] + 1);
         }
     }
-    let g: Vec<f64> = vd.iter().map(|&d| if d >= big { FAR } else { f64::from(d) * f64::from(d) }).collect();
+    let g: Vec<f64> =
+        vd.iter().map(|&d| if d >= big { f64::INFINITY } else { f64::from(d) * f64::from(d) }).collect();
     // Pass 2: per row, lower envelope of the parabolas (q − i)² + g(q).
-    let mut out = vec![FAR; w * h];
+    let mut out = vec![f64::INFINITY; w * h];
     let mut v = vec![0usize; w];
     let mut z = vec![0.0f64; w + 1];
     for y in 0..h {
         let f = &g[y * w..(y + 1) * w];
         let o = &mut out[y * w..(y + 1) * w];
-        // Only feature-reachable columns (finite g) take part; if none, the row stays FAR.
+        // Only feature-reachable columns (finite g) take part; if none, the row stays infinite.
         let mut k: usize = 0;
         let mut started = false;
         for q in 0..w {
-            if f[q] >= FAR {
+            if f[q] == f64::INFINITY {
                 continue;
             }
             if !started {
@@ -94,7 +96,7 @@ pub(crate) fn squared_edt(mask: &Grid<bool>) -> Grid<f64> {
 /// `reach[dy]` for `dy = 0..=⌊t⌋`: the largest `dx ≥ 0` with `dx² + dy² ≤ t²` (compared in f64,
 /// exact for these integers), so a pixel is within `t` of one `dy` rows away iff that one is at
 /// most `reach[dy]` columns away.
-pub(crate) fn reach(t: f64) -> Vec<usize> {
+pub fn reach(t: f64) -> Vec<usize> {
     let t2 = t * t;
     (0..=t.floor() as usize)
         .map(|dy| {
@@ -111,12 +113,12 @@ pub(crate) fn reach(t: f64) -> Vec<usize> {
         .collect()
 }
 
-/// For every pixel, whether some `true` pixel of `mask` is within Euclidean distance `t`
-/// (`0 ≤ t < 65535`, as row distances are kept in `u16`): the same as `squared_edt(mask) ≤ t²`, in O(pixels · t) cheap vectorisable
-/// steps. Per row, the horizontal distance to the nearest mask pixel (capped at ⌊t⌋ + 1) by two
+/// For every pixel, whether some `true` pixel of `mask` is within Euclidean distance `t` (inclusive;
+/// `0 ≤ t < 65535`, as row distances are kept in `u16`): the same as `edt_squared(mask) ≤ t²`, in O(pixels · t)
+/// cheap vectorisable steps (for large `t`, threshold [`edt_squared`] instead: O(pixels) whatever `t`). Per row, the horizontal distance to the nearest mask pixel (capped at ⌊t⌋ + 1) by two
 /// sweeps; then a pixel is near if a row `dy` away has that distance ≤ `reach[dy]`.
-pub(crate) fn near(mask: &Grid<bool>, t: f64) -> Vec<bool> {
-    assert!(t.is_finite() && (0.0..65535.0).contains(&t), "edt::near: distance {t} out of range");
+pub fn within(mask: &Grid<bool>, t: f64) -> Grid<bool> {
+    assert!(t.is_finite() && (0.0..65535.0).contains(&t), "distance::within: distance {t} out of range");
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let rx = reach(t);
     let r = rx.len() - 1;
@@ -143,65 +145,84 @@ pub(crate) fn near(mask: &Grid<bool>, t: f64) -> Vec<bool> {
             }
         }
     }
-    out
+    Grid::from_vec(mask.width(), mask.height(), out).expect("size matches")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{RngExt, SeedableRng};
 
+    /// Brute-force squared distance to the nearest `true` pixel.
     fn brute(mask: &Grid<bool>) -> Grid<f64> {
         let pts: Vec<(i64, i64)> =
-            mask.enumerate().filter(|&(_, _, &b)| b).map(|(x, y, _)| (x as i64, y as i64)).collect();
+            mask.enumerate().filter(|&(_, _, &b)| b).map(|(x, y, _)| (i64::from(x), i64::from(y))).collect();
         Grid::from_fn(mask.width(), mask.height(), |x, y| {
             pts.iter()
-                .map(|&(px, py)| ((px - x as i64).pow(2) + (py - y as i64).pow(2)) as f64)
-                .fold(FAR, f64::min)
+                .map(|&(px, py)| ((px - i64::from(x)).pow(2) + (py - i64::from(y)).pow(2)) as f64)
+                .fold(f64::INFINITY, f64::min)
+        })
+    }
+
+    /// A deterministic pseudo-random mask (64-bit LCG; no RNG crate in this crate).
+    fn mask(w: u32, h: u32, p_per_mille: u64, seed: u64) -> Grid<bool> {
+        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        Grid::from_fn(w, h, |_, _| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 33) % 1000 < p_per_mille
         })
     }
 
     #[test]
     fn matches_brute_force_on_random_masks() {
-        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
-        for case in 0..60u32 {
-            let w = 1 + rng.random_range(0..40u32);
-            let h = 1 + rng.random_range(0..40u32);
-            let p = [0.0, 0.002, 0.02, 0.2, 0.9][(case % 5) as usize];
-            let mask = Grid::from_fn(w, h, |_, _| rng.random_bool(p));
-            assert_eq!(squared_edt(&mask), brute(&mask), "case {case} ({w}×{h}, p = {p})");
+        for case in 0..80u64 {
+            let (w, h) = (1 + (case * 7 % 41) as u32, 1 + (case * 13 % 37) as u32);
+            let p = [0, 2, 20, 200, 900][(case % 5) as usize];
+            let m = mask(w, h, p, case);
+            assert_eq!(edt_squared(&m), brute(&m), "case {case} ({w}×{h}, p = {p}‰)");
         }
     }
 
     #[test]
-    fn near_matches_thresholded_edt() {
-        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(8);
-        for case in 0..40u32 {
-            let w = 1 + rng.random_range(0..90u32);
-            let h = 1 + rng.random_range(0..40u32);
-            let p = [0.0, 0.002, 0.02, 0.2, 0.9][(case % 5) as usize];
-            let mask = Grid::from_fn(w, h, |_, _| rng.random_bool(p));
-            let d = squared_edt(&mask);
+    fn empty_and_full_masks() {
+        assert!(edt_squared(&Grid::new(3, 3, false)).as_slice().iter().all(|v| *v == f64::INFINITY));
+        assert!(edt_squared(&Grid::new(3, 3, true)).as_slice().iter().all(|&v| v == 0.0));
+        assert!(within(&Grid::new(4, 2, false), 3.0).as_slice().iter().all(|&b| !b));
+    }
+
+    #[test]
+    fn single_point_distances() {
+        let mut m = Grid::new(5, 4, false);
+        m[(1, 2)] = true;
+        let d = edt_squared(&m);
+        assert_eq!((d[(1, 2)], d[(2, 2)], d[(0, 3)], d[(4, 0)]), (0.0, 1.0, 2.0, 13.0));
+    }
+
+    #[test]
+    fn within_is_inclusive_and_matches_thresholded_edt() {
+        let mut m = Grid::new(7, 7, false);
+        m[(3, 3)] = true;
+        let d = within(&m, 2.0);
+        assert!(d[(5, 3)] && d[(3, 1)] && !d[(5, 4)] && d[(4, 4)]);
+        assert_eq!(d.as_slice().iter().filter(|&&b| b).count(), 13);
+        for case in 0..40u64 {
+            let (w, h) = (1 + (case * 11 % 90) as u32, 1 + (case * 5 % 40) as u32);
+            let p = [0, 2, 20, 200, 900][(case % 5) as usize];
+            let m = mask(w, h, p, 100 + case);
+            let d = edt_squared(&m);
             for t in [0.0, 1.0, 1.5, 2.0, 2.9, 5.0, 64.0] {
                 let want: Vec<bool> = d.as_slice().iter().map(|&v| v <= t * t).collect();
-                assert_eq!(near(&mask, t), want, "case {case} ({w}×{h}, p = {p}, t = {t})");
+                assert_eq!(within(&m, t).as_slice(), &want[..], "case {case} ({w}×{h}, p = {p}‰, t = {t})");
             }
         }
+    }
+
+    #[test]
+    fn reach_is_the_largest_offset_inside_the_disk() {
         for t in [0.0, 0.5, 1.0, 2.5, 7.3, 64.0] {
             for (dy, &dx) in reach(t).iter().enumerate() {
                 assert!((dx * dx + dy * dy) as f64 <= t * t, "t {t}, dy {dy}");
                 assert!((((dx + 1) * (dx + 1) + dy * dy) as f64) > t * t, "t {t}, dy {dy}");
             }
         }
-    }
-
-    #[test]
-    fn single_point_distances() {
-        let mut mask = Grid::new(5, 4, false);
-        mask[(1, 2)] = true;
-        let d = squared_edt(&mask);
-        assert_eq!(d[(1, 2)], 0.0);
-        assert_eq!(d[(4, 0)], 13.0);
-        assert_eq!(d[(0, 3)], 2.0);
     }
 }

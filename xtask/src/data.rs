@@ -1,0 +1,292 @@
+//! Labelled data sets for `eval` and `tune`: the synthetic benchmark, real ABW folders, any `STEM.range` + `STEM.gt-seg` folder.
+
+use anyhow::{Context, Result, bail};
+use rangeimage::{Camera, LabelImage};
+use rangeio::abw::{Dataset, Split};
+use std::path::{Path, PathBuf};
+
+/// Which images of a folder a command reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// `tune`: the training split where the folder has one, otherwise every labelled image.
+    Tune,
+    /// `eval`: the test split where the folder has one, otherwise every labelled image.
+    Eval,
+}
+
+/// One data set named on the command line: a folder, and the camera its images need.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataSpec {
+    /// The folder (`None`: the synthetic benchmark, generated on first use).
+    pub dir: Option<PathBuf>,
+    /// The camera of every image; `None`: by ABW file name (calibration 0 or 1).
+    pub camera: Option<Camera>,
+}
+
+impl DataSpec {
+    /// The synthetic ABW-like benchmark.
+    pub fn synthetic() -> Self {
+        Self { dir: None, camera: None }
+    }
+
+    /// The folder this spec reads, generating the synthetic benchmark if needed.
+    pub fn resolve_dir(&self, root: &Path) -> Result<PathBuf> {
+        match &self.dir {
+            Some(d) => Ok(d.clone()),
+            None => crate::gen_data::ensure_synthetic_data(root),
+        }
+    }
+}
+
+/// Parses repeated `--data DIR [--camera CAM]` options (a `--camera` applies to the `--data` before it;
+/// `--data synthetic` names the synthetic benchmark). Returns the specs and the arguments left over.
+pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
+    let mut specs: Vec<DataSpec> = Vec::new();
+    let mut rest = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--data" => {
+                let v = it.next().context("--data needs a folder (or `synthetic`)")?;
+                specs.push(if v == "synthetic" {
+                    DataSpec::synthetic()
+                } else {
+                    DataSpec { dir: Some(v.into()), camera: None }
+                });
+            }
+            "--camera" => {
+                let v =
+                    it.next().context("--camera needs a value (abw0, abw1, grid, pinhole:fx,fy,cx,cy)")?;
+                let camera = rangeio::parse_camera(v).map_err(|e| anyhow::anyhow!("--camera {v}: {e}"))?;
+                let last = specs.last_mut().context("--camera must follow the --data it applies to")?;
+                if last.camera.is_some() {
+                    bail!("--camera given twice for one --data");
+                }
+                last.camera = Some(camera);
+            }
+            _ => rest.push(a.clone()),
+        }
+    }
+    Ok((specs, rest))
+}
+
+/// One labelled image of a data set, not yet read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelledImage {
+    /// File name without extension, e.g. `abw.test.7` or `nyu.15`.
+    pub stem: String,
+    /// The range file.
+    pub range: PathBuf,
+    /// The ground-truth labels.
+    pub gt_seg: PathBuf,
+    /// Angles between adjacent GT regions, where the data set has them.
+    pub gt_ang: Option<PathBuf>,
+    /// The camera to read it with.
+    pub camera: Camera,
+}
+
+/// A labelled image read into memory.
+pub struct LoadedImage {
+    /// File name without extension.
+    pub stem: String,
+    /// The range image (NaN = no data) with its camera and format.
+    pub frame: rangeio::Frame,
+    /// Ground-truth labels (ABW convention).
+    pub gt: LabelImage,
+    /// `(a, b, degrees)` for adjacent GT regions; empty where the data set has no `.gt-ang`.
+    pub angles: Vec<(u32, u32, f64)>,
+}
+
+impl LabelledImage {
+    /// Reads the range image, ground truth and angles.
+    pub fn load(&self) -> Result<LoadedImage> {
+        let frame = rangeio::read(
+            &self.range,
+            &rangeio::ReadOptions { camera: Some(self.camera), ..Default::default() },
+        )?;
+        let gt = rangeio::abw::read_labels(&self.gt_seg, true)?;
+        if !gt.same_size(&frame.range) {
+            bail!(
+                "{}: ground truth is {:?} but the range image is {:?}",
+                self.gt_seg.display(),
+                gt.dimensions(),
+                frame.range.dimensions()
+            );
+        }
+        let angles = match &self.gt_ang {
+            Some(p) => rangeio::abw::read_angles(p)?.iter().map(|a| (a.a, a.b, a.angle_deg)).collect(),
+            None => Vec::new(),
+        };
+        Ok(LoadedImage { stem: self.stem.clone(), frame, gt, angles })
+    }
+}
+
+/// A data set's images for one role, with a short name for reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataSet {
+    /// Short name: `synthetic` or the folder's name.
+    pub name: String,
+    /// The folder.
+    pub dir: PathBuf,
+    /// What the images were chosen as, for reports (e.g. "test split", "every labelled image").
+    pub selection: &'static str,
+    /// How the camera was chosen, for reports.
+    pub camera: String,
+    /// The images, in a fixed order.
+    pub images: Vec<LabelledImage>,
+}
+
+/// Finds the images of `spec` that `role` reads.
+///
+/// A folder with ABW names (`abw.train.N`, `abw.test.N`) gives its training split to `tune` and its test split to
+/// `eval`; where the split is absent (the real ABW test images stand in for training data) or the names are not
+/// ABW names, every `STEM.range` with a `STEM.gt-seg` beside it is read. Images without ABW names need `--camera`.
+pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
+    let dir = spec.resolve_dir(root)?;
+    let name = match &spec.dir {
+        None => "synthetic".to_string(),
+        Some(d) => d
+            .canonicalize()
+            .ok()
+            .as_deref()
+            .and_then(Path::file_name)
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| d.display().to_string()),
+    };
+    let abw = Dataset::discover(&dir).ok();
+    let split = abw.as_ref().map(|ds| match role {
+        Role::Tune => (&ds.train, Split::Train),
+        Role::Eval => (&ds.test, Split::Test),
+    });
+    let mut images = Vec::new();
+    let selection = match split {
+        Some((imgs, split)) if !imgs.is_empty() => {
+            for img in imgs {
+                let Some(gt_seg) = img.gt_seg.clone() else {
+                    bail!("{}: no ground truth ({}.gt-seg)", dir.display(), img.stem);
+                };
+                images.push(LabelledImage {
+                    stem: img.stem.clone(),
+                    range: img.range.clone(),
+                    gt_seg,
+                    gt_ang: img.gt_ang.clone(),
+                    camera: spec.camera.unwrap_or(img.camera),
+                });
+            }
+            if split == Split::Train { "training split" } else { "test split" }
+        }
+        _ => {
+            images = every_labelled(&dir, spec.camera)?;
+            "every labelled image"
+        }
+    };
+    if images.is_empty() {
+        bail!("{}: no labelled images (STEM.range with STEM.gt-seg)", dir.display());
+    }
+    let camera = match spec.camera {
+        Some(c) => format!("{c:?}"),
+        None => "ABW calibration by file name".to_string(),
+    };
+    Ok(DataSet { name, dir, selection, camera, images })
+}
+
+/// Every `STEM.range` in `dir` with a `STEM.gt-seg` beside it, sorted by stem (numbers in natural order).
+fn every_labelled(dir: &Path, camera: Option<Camera>) -> Result<Vec<LabelledImage>> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    let mut images = Vec::new();
+    for entry in entries {
+        let entry = entry.with_context(|| format!("{}: cannot list", dir.display()))?;
+        let file_name = entry.file_name();
+        let Some(stem) = file_name.to_str().and_then(|n| n.strip_suffix(".range")) else { continue };
+        let gt_seg = dir.join(format!("{stem}.gt-seg"));
+        if !gt_seg.is_file() {
+            continue;
+        }
+        let camera = match camera.or_else(|| rangeio::abw::camera_for_path(&entry.path())) {
+            Some(c) => c,
+            None => {
+                bail!("{}: no camera for this file name: pass --camera after --data", entry.path().display())
+            }
+        };
+        let gt_ang = Some(dir.join(format!("{stem}.gt-ang"))).filter(|p| p.is_file());
+        images.push(LabelledImage { stem: stem.to_string(), range: entry.path(), gt_seg, gt_ang, camera });
+    }
+    images.sort_by_key(|img| natural_key(&img.stem));
+    Ok(images)
+}
+
+/// A sort key that orders the digit runs of a name by value (`nyu.2` before `nyu.15`).
+fn natural_key(s: &str) -> Vec<(String, u64)> {
+    let mut key = Vec::new();
+    let mut text = String::new();
+    let mut chars = s.chars().peekable();
+    while let Some(&c) = chars.peek() {
+        if c.is_ascii_digit() {
+            let mut n = 0u64;
+            while let Some(d) = chars.peek().and_then(|c| c.to_digit(10)) {
+                n = n.saturating_mul(10).saturating_add(u64::from(d));
+                chars.next();
+            }
+            key.push((std::mem::take(&mut text), n));
+        } else {
+            text.push(c);
+            chars.next();
+        }
+    }
+    key.push((text, 0));
+    key
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(s: &str) -> Vec<String> {
+        s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn camera_follows_its_data() {
+        let (specs, rest) = parse_specs(&args("--data a --data b --camera grid --out o")).unwrap();
+        assert_eq!(specs.len(), 2);
+        assert_eq!(specs[0], DataSpec { dir: Some("a".into()), camera: None });
+        assert_eq!(specs[1], DataSpec { dir: Some("b".into()), camera: Some(Camera::Grid) });
+        assert_eq!(rest, args("--out o"));
+        assert_eq!(parse_specs(&args("--data synthetic")).unwrap().0, vec![DataSpec::synthetic()]);
+    }
+
+    #[test]
+    fn camera_without_data_or_twice_is_an_error() {
+        assert!(parse_specs(&args("--camera grid")).is_err());
+        assert!(parse_specs(&args("--data a --camera grid --camera grid")).is_err());
+        assert!(parse_specs(&args("--data a --camera nonsense")).is_err());
+    }
+
+    #[test]
+    fn natural_order() {
+        let mut v = vec!["nyu.15", "nyu.2", "nyu.1436", "abw.test.10", "abw.test.9"];
+        v.sort_by_key(|s| natural_key(s));
+        assert_eq!(v, ["abw.test.9", "abw.test.10", "nyu.2", "nyu.15", "nyu.1436"]);
+    }
+
+    #[test]
+    fn folder_without_abw_names_needs_a_camera() {
+        let dir = std::env::temp_dir().join(format!("xtask-data-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let range = rangeimage::RangeImage::new(4, 4, 100.0);
+        rangeio::abw::write_range(&dir.join("k.7.range"), &range).unwrap();
+        rangeio::abw::write_labels(&dir.join("k.7.gt-seg"), &LabelImage::new(4, 4, 10)).unwrap();
+        rangeio::abw::write_range(&dir.join("unlabelled.range"), &range).unwrap();
+        let spec = DataSpec { dir: Some(dir.clone()), camera: None };
+        let err = discover(Path::new("."), &spec, Role::Eval).unwrap_err();
+        assert!(format!("{err:#}").contains("k.7.range: no camera"), "{err:#}");
+        let spec = DataSpec { dir: Some(dir.clone()), camera: Some(Camera::Grid) };
+        let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
+        assert_eq!(set.images.len(), 1);
+        assert_eq!(set.images[0].stem, "k.7");
+        assert_eq!(set.selection, "every labelled image");
+        let loaded = set.images[0].load().unwrap();
+        assert_eq!(loaded.gt.dimensions(), (4, 4));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
