@@ -127,6 +127,7 @@ impl Config {
         c.segment.mode = relax::SegmentMode::Components;
         // Plain components have no region-growing borders to close their contours.
         c.segment.gap_close_px = 2.0;
+        c.segment.min_region_px = 50;
         c
     }
 

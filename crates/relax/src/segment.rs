@@ -24,7 +24,8 @@ pub struct SegmentParams {
     /// to `components`).
     pub mode: SegmentMode,
     /// Connected components (of core pixels) smaller than this are dropped (their pixels are
-    /// then filled from adjacent regions like edge pixels).
+    /// then filled from adjacent regions like edge pixels). The default equals region growing's
+    /// `min_region_px`: a piece cut off by edges needs the support a grown region needs.
     pub min_region_px: u32,
     /// Core pixels, whose components seed the regions, are the valid pixels farther than this
     /// from every edge pixel (Euclidean); 0 = every non-edge pixel. A positive value closes gaps
@@ -61,7 +62,7 @@ impl Default for SegmentParams {
     fn default() -> Self {
         Self {
             mode: SegmentMode::Regions,
-            min_region_px: 50,
+            min_region_px: 200,
             gap_close_px: 0.0,
             unlabelled_core: true,
             min_border_support: 0.3,
