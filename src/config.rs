@@ -21,8 +21,8 @@ pub enum FinalEdges {
     /// The relaxed edge sets: C1 ∪ the supported relaxed C2 (the paper; C1 and C2 often run as two
     /// parallel lines along one boundary).
     Relaxed,
-    /// The borders of the final segmentation (the same rule as C1, `regiongrow.c1_one_sided`): one
-    /// boundary per pair of final regions, shaped by both edge sets through the segmentation.
+    /// The borders between the final segmentation's regions ([`crate::pipeline::region_borders`]):
+    /// one boundary per pair of final regions, shaped by both edge sets through the segmentation.
     #[default]
     Segmentation,
 }
