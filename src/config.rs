@@ -14,19 +14,34 @@ pub enum C1Strength {
     Curvedness,
 }
 
+/// What the final edge map C is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum FinalEdges {
+    /// The relaxed edge sets: C1 ∪ the supported relaxed C2 (the paper; C1 and C2 often run as two
+    /// parallel lines along one boundary).
+    Relaxed,
+    /// The borders between the final segmentation's regions ([`crate::pipeline::region_borders`]):
+    /// one boundary per pair of final regions, shaped by both edge sets through the segmentation.
+    #[default]
+    Segmentation,
+}
+
 /// Pipeline-level options that belong to no single stage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PipelineParams {
     /// Strength of C1 points in the relaxation energy.
     pub c1_strength: C1Strength,
-    /// Run the relaxation (false: final edges are C1 ∪ C2 as detected).
+    /// Run the relaxation (false: the relaxed edge sets are C1 and C2 as detected).
     pub relax: bool,
+    /// What the final edge map C is.
+    pub final_edges: FinalEdges,
 }
 
 impl Default for PipelineParams {
     fn default() -> Self {
-        Self { c1_strength: C1Strength::default(), relax: true }
+        Self { c1_strength: C1Strength::default(), relax: true, final_edges: FinalEdges::default() }
     }
 }
 
@@ -103,16 +118,21 @@ impl Default for Config {
 impl Config {
     /// The configuration faithful to the paper (`configs/paper.toml`): Gaussian-curvature growth, |K| as the
     /// strength of C1 points, no final support test of C2, the final segmentation as plain connected
-    /// components of the non-edge pixels, and Canny thresholds chosen as the paper chose its parameters (the
-    /// highest precision of C2 against C1, on the real ABW images that stand in for its training set).
+    /// components of the non-edge pixels, the relaxed edge sets as the final edge map, and Canny thresholds chosen
+    /// as the paper chose its parameters (the highest precision of C2 against C1, on the real ABW images that stand
+    /// in for its training set).
     pub fn paper() -> Self {
         let mut c = Self::default();
         c.vcanny.thresholds.low = 32.0;
         c.vcanny.thresholds.high = 64.0;
         c.pipeline.c1_strength = C1Strength::AbsK;
+        c.pipeline.final_edges = FinalEdges::Relaxed;
         c.relax.support_px = 0.0;
         c.regiongrow = regiongrow::Params::paper();
         c.segment.mode = relax::SegmentMode::Components;
+        // Plain components have no region-growing borders to close their contours.
+        c.segment.gap_close_px = 2.0;
+        c.segment.min_region_px = 50;
         c
     }
 

@@ -8,7 +8,7 @@ pub mod output;
 pub mod pipeline;
 pub mod planes;
 
-pub use config::{C1Strength, Config, ConfigError, PipelineParams};
+pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams};
 pub use output::write_outputs;
 pub use pipeline::{Output, segment};
 pub use planes::{Plane, planes};

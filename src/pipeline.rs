@@ -1,6 +1,6 @@
 //! The whole method on one in-memory range image: features → regions (C1) and Canny (C2) → relaxation → labels.
 
-use crate::config::{C1Strength, Config};
+use crate::config::{C1Strength, Config, FinalEdges};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 use serde::Serialize;
 use std::time::Instant;
@@ -38,7 +38,7 @@ pub struct Output {
 /// What the last stage produces: relaxed edges and the final segmentation.
 #[derive(Debug, Clone)]
 pub struct Finish {
-    /// C1 and C2 after relaxation, and the final edge map C = C1 ∪ C2.
+    /// C1 and C2 after relaxation, and their union with C2 restricted by the support test.
     pub relaxed: relax::Relaxed,
     /// Relaxation diagnostics (energies, acceptance).
     pub relax_info: relax::Info,
@@ -46,12 +46,14 @@ pub struct Finish {
     pub labels: LabelImage,
     /// Geometry of each final region.
     pub final_regions: Vec<Region>,
+    /// The final edge map C (`pipeline.final_edges`: the final segmentation's borders, or `relaxed.edges`).
+    pub edges: EdgeMap,
 }
 
 impl Finish {
     /// The final edge map C.
     pub fn edges(&self) -> &EdgeMap {
-        &self.relaxed.edges
+        &self.edges
     }
 }
 
@@ -106,7 +108,11 @@ pub fn finish(
     // two faces that region growing merged has only C2 to show it.
     let (labels, final_regions) =
         relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
-    Finish { relaxed, relax_info, labels, final_regions }
+    let edges = match config.pipeline.final_edges {
+        FinalEdges::Relaxed => relaxed.edges.clone(),
+        FinalEdges::Segmentation => region_borders(&labels),
+    };
+    Finish { relaxed, relax_info, labels, final_regions, edges }
 }
 
 /// The C1 strength map s1 for the relaxation energy; 0 where undefined.
@@ -116,4 +122,24 @@ pub fn c1_strength(features: &SurfaceFeatures, which: C1Strength) -> Grid<f32> {
         C1Strength::Curvedness => features.curvedness.clone(),
     };
     src.map(|v| if v.is_finite() { *v } else { 0.0 })
+}
+
+/// The borders between the regions of `labels` (0 = none): a region pixel with a 4-neighbour in
+/// another region, and an unlabelled pixel whose 4-neighbours include two different regions (a
+/// one-pixel gap between two regions is their border). A region's edge against unlabelled pixels
+/// (no data, pixels the fill left out) is no border between two surfaces.
+pub fn region_borders(labels: &LabelImage) -> EdgeMap {
+    let (w, h) = labels.dimensions();
+    let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| l != 0);
+    Grid::from_fn(w, h, |x, y| {
+        let (x, y) = (i64::from(x), i64::from(y));
+        let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
+        match at(x, y) {
+            Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
+            None => {
+                let mut it = nb.iter().flatten();
+                it.next().is_some_and(|&first| it.any(|&m| m != first))
+            }
+        }
+    })
 }

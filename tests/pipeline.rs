@@ -15,6 +15,7 @@ fn bit_identical_at_one_and_two_threads() {
     let b = run_with_threads(2, 3);
     assert_eq!(a.fin.labels, b.fin.labels);
     assert_eq!(a.fin.relaxed.edges, b.fin.relaxed.edges);
+    assert_eq!(a.fin.edges, b.fin.edges);
     assert_eq!(a.regions.labels, b.regions.labels);
     assert_eq!(a.canny.edges, b.canny.edges);
     assert_eq!(a.fin.relax_info.energy_after.to_bits(), b.fin.relax_info.energy_after.to_bits());
@@ -32,4 +33,28 @@ fn labels_are_zero_on_no_data_and_energy_does_not_increase() {
     }
     assert!(out.fin.relax_info.energy_after <= out.fin.relax_info.energy_before);
     assert!(!out.fin.final_regions.is_empty());
+}
+
+#[test]
+fn final_edges_are_the_final_segmentation_borders_or_the_relaxed_sets() {
+    let scene = crate::small_scene(5);
+    let range = crate::range_of(&scene);
+    let camera = rangeimage::Camera::ABW0;
+    let out = rangeseg::segment(&range, &camera, &Config::default());
+    assert!(out.fin.edges().as_slice().iter().any(|&b| b), "the scene has several final regions");
+    // C holds exactly the region pixels with a 4-neighbour in another region, and the unlabelled
+    // pixels between two regions.
+    for (x, y, &l) in out.fin.labels.enumerate() {
+        let nb: Vec<u32> = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+            .iter()
+            .filter_map(|&(dx, dy)| out.fin.labels.get_signed(i64::from(x) + dx, i64::from(y) + dy).copied())
+            .filter(|&m| m != 0)
+            .collect();
+        let want = if l != 0 { nb.iter().any(|&m| m != l) } else { nb.iter().any(|&m| m != nb[0]) };
+        assert_eq!(out.fin.edges()[(x, y)], want, "pixel ({x}, {y}), label {l}, neighbours {nb:?}");
+    }
+    let mut relaxed = Config::default();
+    relaxed.pipeline.final_edges = rangeseg::FinalEdges::Relaxed;
+    let out = rangeseg::pipeline::finish(&range, &camera, &relaxed, &out.features, &out.regions, &out.canny);
+    assert_eq!(out.edges(), &out.relaxed.edges, "relaxed: C is C1 ∪ the supported relaxed C2");
 }

@@ -570,6 +570,9 @@ fn grow_default<const N: usize>(
     let offs: [isize; N] = std::array::from_fn(|d| ctx.offs[d]);
     let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
     let max_res = f64::from(params.max_residual);
+    let rms_ratio = f64::from(params.residual_rms_ratio);
+    // The residual limit: max_res, raised to rms_ratio × the region's RMS at each refit.
+    let mut lim = max_res;
     let refit_min = params.refit_every_px as usize;
     let geo = &ctx.geo[..];
     queue.clear();
@@ -595,7 +598,7 @@ fn grow_default<const N: usize>(
                 continue;
             }
             let g = &geo[j];
-            if plane.distance(point_of(g)).abs() > max_res {
+            if plane.distance(point_of(g)).abs() > lim {
                 continue;
             }
             if dot(normal_of(g), plane.normal).abs() < cos_max {
@@ -611,6 +614,7 @@ fn grow_default<const N: usize>(
                 summed = queue.len();
                 if let Some(p) = mom.fit(|p| ctx.toward(p)) {
                     plane = p;
+                    lim = max_res.max(rms_ratio * plane.mean_sq.max(0.0).sqrt());
                 }
                 due = refit_due(count, refit_min);
             }

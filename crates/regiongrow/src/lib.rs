@@ -21,7 +21,8 @@
 //!    creases, where K ≈ 0, see SPEC §3.1). [`Mode::Default`]: a neighbour joins if its curvedness
 //!    ≤ `max_curvedness` and its local normal is within `max_slant_deg` of the line of sight
 //!    (seed and growth condition), its local normal is within `max_angle_deg` of the region's plane normal,
-//!    and its 3D point lies within `max_residual` of the region's plane. The region plane starts
+//!    and its 3D point lies within `max(max_residual, residual_rms_ratio × RMS)` of the region's
+//!    plane, RMS being the region's distance to its own plane at the last refit. The region plane starts
 //!    as the seed's local plane and is refitted from running 3D moments after
 //!    `max(refit_every_px, n / 4)` additions (so O(log n) refits per region).
 //!    Local normals come from the features' local plane slopes `(a, b)` back-projected through the
@@ -88,6 +89,12 @@ pub struct Params {
     pub max_angle_deg: f32,
     /// Default mode: maximum distance of a pixel's 3D point to the region's plane, in camera units.
     pub max_residual: f32,
+    /// Default mode: the residual limit of growth is `max(max_residual, this × the region's RMS
+    /// distance to its own plane)` (0 = `max_residual` alone). The region's own scatter, measured
+    /// at each refit, holds the image's noise and what of its surface a plane does not model
+    /// (depth encodings that bend planes, staircases, stripes), so the limit follows the image
+    /// instead of one absolute noise level.
+    pub residual_rms_ratio: f32,
     /// Default mode: a pixel grows (or seeds) only if its local normal is within this angle of the
     /// direction toward the sensor. Rejects the steep "walls" that local fits across depth jumps
     /// produce (their curvature is tiny because of the gradient term in K and H).
@@ -130,6 +137,7 @@ impl Default for Params {
             max_curvedness: 1.0,
             max_angle_deg: 40.0,
             max_residual: 3.0,
+            residual_rms_ratio: 3.0,
             max_slant_deg: 80.0,
             refit_every_px: 16,
             merge_max_angle_deg: 10.0,
@@ -168,6 +176,7 @@ impl Params {
             ("max_k_diff", self.max_k_diff),
             ("max_curvedness", self.max_curvedness),
             ("max_residual", self.max_residual),
+            ("residual_rms_ratio", self.residual_rms_ratio),
             ("merge_max_residual", self.merge_max_residual),
             ("fill_max_residual", self.fill_max_residual),
         ];
