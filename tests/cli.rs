@@ -29,7 +29,17 @@ fn score_of_written_outputs_equals_in_memory_scores() {
     let out_dir = dir.path().join("out");
     let o = rangeseg(&["segment".as_ref(), range_path.as_os_str(), "-o".as_ref(), out_dir.as_os_str()]);
     assert!(o.status.success(), "segment failed: {}", String::from_utf8_lossy(&o.stderr));
-    for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png", "json", "planes.json"] {
+    for ext in [
+        "ms-seg",
+        "ms-nor",
+        "labels.png",
+        "edges.png",
+        "c1.png",
+        "c2.png",
+        "regions.png",
+        "json",
+        "planes.json",
+    ] {
         assert!(out_dir.join(format!("abw.train.0.{ext}")).is_file(), "missing output .{ext}");
     }
 
@@ -138,7 +148,7 @@ fn segment_skips_its_own_outputs_when_run_twice_on_a_folder() {
         .filter(|n| n.ends_with(".json"))
         .collect();
     jsons.sort();
-    assert_eq!(jsons, ["abw.train.1.json"]);
+    assert_eq!(jsons, ["abw.train.1.json", "abw.train.1.planes.json"]);
 }
 
 #[test]
@@ -228,6 +238,11 @@ fn regions_beyond_the_ms_seg_cap_are_reported_and_kept_in_the_labels_png() {
     assert_eq!(labels.len() as u64, final_regions);
 }
 
+/// `NAME.json`, the file `segment` writes last for an image (not `NAME.planes.json`).
+fn is_image_json(name: &str) -> bool {
+    name.ends_with(".json") && !name.ends_with(".planes.json")
+}
+
 #[test]
 fn interrupt_leaves_no_temporary_files_and_json_marks_complete_sets() {
     if !Path::new("/bin/kill").exists() && !Path::new("/usr/bin/kill").exists() {
@@ -254,7 +269,7 @@ fn interrupt_leaves_no_temporary_files_and_json_marks_complete_sets() {
     // Interrupt once the first image is complete (or when the run has ended on its own).
     let json_count = || {
         std::fs::read_dir(&out).map_or(0, |d| {
-            d.filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().ends_with(".json"))).count()
+            d.filter(|e| e.as_ref().is_ok_and(|e| is_image_json(&e.file_name().to_string_lossy()))).count()
         })
     };
     while json_count() == 0 && child.try_wait().unwrap().is_none() {
@@ -271,9 +286,11 @@ fn interrupt_leaves_no_temporary_files_and_json_marks_complete_sets() {
     if !ended_alone {
         assert_eq!(o.status.code(), Some(130), "exit 128 + SIGINT: {}", stderr_of(&o));
     }
-    for json in names.iter().filter(|n| n.ends_with(".json")) {
+    for json in names.iter().filter(|n| is_image_json(n)) {
         let stem = json.trim_end_matches(".json");
-        for ext in ["ms-seg", "ms-nor", "labels.png", "edges.png", "c1.png", "c2.png", "regions.png"] {
+        for ext in
+            ["ms-seg", "ms-nor", "labels.png", "planes.json", "edges.png", "c1.png", "c2.png", "regions.png"]
+        {
             assert!(names.contains(&format!("{stem}.{ext}")), "{stem} has a JSON but no .{ext}");
         }
     }
