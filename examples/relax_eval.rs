@@ -1,4 +1,4 @@
-//! Measures the relax stage on the synthetic training split (SPEC §3.4, the paper's Table II).
+//! Measures the relax stage on the synthetic training split (docs/method.md §3.4, the paper's Table II).
 //!
 //! For each training image (`scenegen::benchmark_image(false, i)`, the scenes `cargo xtask
 //! gen-data` writes as `abw.train.i`): features → regiongrow (C1, s1) and vcanny (C2, |∇|) →

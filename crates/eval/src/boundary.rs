@@ -37,7 +37,7 @@ use crate::distance::{dilate, edt_squared, radius_squared};
 use crate::thin;
 use rangeimage::{EdgeMap, Grid, LabelImage};
 
-/// Smallest label that names a region in the ABW convention (SPEC §2.1).
+/// Smallest label that names a region in the ABW convention (docs/method.md §2.1).
 pub const FIRST_REGION_LABEL: u32 = 10;
 
 /// Precision, recall and F-measure with the counts they come from.

@@ -1,6 +1,6 @@
 //! Hoover et al. (1996) region metrics, following the rules of the USF `compare` program.
 //!
-//! The rules below are SPEC §3.5 and reproduce `compare.c` of the USF SegComp tools
+//! The rules below are docs/method.md §3.5 and reproduce `compare.c` of the USF SegComp tools
 //! (`ClassifyRegions`, `ComputeTables`, `OutputTable`) step by step, quirks included.
 //!
 //! # Rules (tolerance `T`, `0.5 < T ≤ 1`)
@@ -58,7 +58,7 @@ pub enum Convention {
     NonZero,
     /// [`Convention::Abw`] unless some pixel carries a label in 4..=9, then [`Convention::NonZero`].
     ///
-    /// Labels 4..=9 are illegal in the ABW convention (SPEC §2.1), so their presence means a
+    /// Labels 4..=9 are illegal in the ABW convention (docs/method.md §2.1), so their presence means a
     /// segmentation numbered from 1. ABW files may hold 1..=3 (unlabelled: noise, too small), so
     /// those alone do not switch. A 1-based segmentation with at most 3 regions is therefore read
     /// as ABW (all unlabelled): pass [`Convention::NonZero`] explicitly for such inputs.
@@ -575,7 +575,7 @@ mod tests {
 
     #[test]
     fn under_segmentation_replaces_a_worse_correct_detection() {
-        // SPEC §3.5's example. GT A = 10 (90 px) and B = 11 (10 px), merged into MS M = 20
+        // docs/method.md §3.5's example. GT A = 10 (90 px) and B = 11 (10 px), merged into MS M = 20
         // (100 px). Step 1: A–M correct (90/90 = 1, 90/100 = 0.9, mean 0.95). Step 3: M
         // under-segments A and B (100/100 and 100/100, mean 1.0 > 0.95) and replaces it.
         let gt = runs(&[(10, 90), (11, 10)]);

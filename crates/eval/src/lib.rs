@@ -1,6 +1,6 @@
 //! Edge and region metrics: paper precision, boundary P/R/F, Hoover et al. region metrics.
 //!
-//! Everything here is pure computation on in-memory images (no I/O). The metrics (SPEC §3.5):
+//! Everything here is pure computation on in-memory images (no I/O). The metrics (docs/method.md §3.5):
 //! - [`paper_precision`]: the paper's Eq. 7, detected edge pixels within τ of a reference set.
 //! - [`boundary`]: boundary precision/recall/F against ground-truth region boundaries, simple
 //!   distance and one-to-one (BSDS-style) matching of the thinned maps ([`thin`]), with a

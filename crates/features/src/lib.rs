@@ -1,4 +1,4 @@
-//! Per-pixel local planes, derivatives and curvatures of a range image (SPEC §3.1).
+//! Per-pixel local planes, derivatives and curvatures of a range image (docs/method.md §3.1).
 //!
 //! - [`fit_planes`]: least-squares plane `z = a·x + b·y + c` per pixel over the valid pixels of a `w × w` window,
 //!   x and y measured from the image centre.
@@ -165,7 +165,7 @@ fn compute_with(
 }
 
 /// The first and second derivatives of the quadratic fit `z = c0 + c1x + c2y + c3x² + c4xy + c5y²` of every pixel
-/// (SPEC §3.1: `Ix = c1, Iy = c2, Ixx = 2c3, Ixy = c4, Iyy = 2c5`), from [`derivatives`].
+/// (docs/method.md §3.1: `Ix = c1, Iy = c2, Ixx = 2c3, Ixy = c4, Iyy = 2c5`), from [`derivatives`].
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Derivatives {
     /// First derivatives `[Ix, Iy]`.

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// The USF `range-to-coords` calibration of one ABW scanner setting (SPEC §2.1).
+/// The USF `range-to-coords` calibration of one ABW scanner setting (docs/method.md §2.1).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AbwCalibration {
     /// Added to `v / scal` to give the distance term `d`.
@@ -51,7 +51,7 @@ impl Camera {
     /// The ABW camera for calibration 1.
     pub const ABW1: Camera = Camera::Abw(AbwCalibration::CAL1);
 
-    /// The ABW calibration of the image with this split and index (SPEC §2.1).
+    /// The ABW calibration of the image with this split and index (docs/method.md §2.1).
     pub fn abw_for(test_split: bool, index: u32) -> Camera {
         if test_split && matches!(index, 0 | 19 | 21 | 25 | 27 | 28 | 29) { Self::ABW1 } else { Self::ABW0 }
     }

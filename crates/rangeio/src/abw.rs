@@ -1,4 +1,4 @@
-//! The ABW benchmark files (SPEC §2.1): Sun rasterfiles, `.gt-ang`/`.ms-nor` text, directory discovery.
+//! The ABW benchmark files (docs/method.md §2.1): Sun rasterfiles, `.gt-ang`/`.ms-nor` text, directory discovery.
 
 use crate::{ReadError, WriteError, check_dims, read_file, write_atomic};
 use rangeimage::{Camera, Grid, LabelImage, RangeImage};
@@ -12,7 +12,7 @@ pub const SUN_MAGIC_BE: [u8; 4] = [0x59, 0xa6, 0x6a, 0x95];
 pub const SUN_MAGIC_LE: [u8; 4] = [0x95, 0x6a, 0xa6, 0x59];
 const HEADER_LEN: usize = 32;
 
-/// Decodes an 8-bit Sun rasterfile (SPEC §2.1) into its raw byte values; `path` names the file in errors.
+/// Decodes an 8-bit Sun rasterfile (docs/method.md §2.1) into its raw byte values; `path` names the file in errors.
 ///
 /// Accepts both byte orders of the header, skips `maplength` bytes of colour map and drops the pad
 /// byte that ends each row of odd width. Types 0 (old), 1 (standard) and 3 (RGB, same layout at
@@ -393,7 +393,7 @@ pub struct AbwImage {
     pub gt_seg: Option<PathBuf>,
     /// The `.gt-ang` file, if present.
     pub gt_ang: Option<PathBuf>,
-    /// The calibration of this image (SPEC §2.1).
+    /// The calibration of this image (docs/method.md §2.1).
     pub camera: Camera,
 }
 

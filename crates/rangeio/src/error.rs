@@ -89,7 +89,7 @@ pub enum ReadError {
         /// What is wrong, e.g. `"pgm maxval 0"`.
         what: String,
     },
-    /// A label file breaks the ABW label rules (SPEC §2.1).
+    /// A label file breaks the ABW label rules (docs/method.md §2.1).
     #[error("{path}: {problem}")]
     Label {
         /// The file.

@@ -1,6 +1,6 @@
 //! Reading and writing range images: ABW Sun rasterfiles, sensor depth formats, PNG outputs.
 //!
-//! - [`abw`]: the ABW benchmark files (SPEC §2.1): `.range`, `.gt-seg`, `.ms-seg` Sun rasterfiles,
+//! - [`abw`]: the ABW benchmark files (docs/method.md §2.1): `.range`, `.gt-seg`, `.ms-seg` Sun rasterfiles,
 //!   `.gt-ang` and `.ms-nor` text files, and [`abw::Dataset::discover`].
 //! - [`read`]: any supported depth input (Sun rasterfile, PGM, PNG, TIFF, organized PCD), detected
 //!   from its magic bytes, as a [`Frame`] with a range image, a camera and a record of the format.

@@ -1,6 +1,6 @@
 //! Multi-seed region growing with a curvature homogeneity criterion, and region borders C1.
 //!
-//! This is the paper's Algorithm 1 (SPEC §3.2), completed where the paper is silent:
+//! This is the paper's Algorithm 1 (docs/method.md §3.2), completed where the paper is silent:
 //!
 //! 1. **Seeds.** Every pixel that can grow (finite range and finite features; in
 //!    [`Mode::Default`] also curvedness ≤ `max_curvedness`) and whose `k_std` ≤ `t_sigma` is a
@@ -18,7 +18,7 @@
 //!    actually used is reported in [`Info::t_sigma_used`].
 //! 2. **Growth** is breadth-first over 4- (or 8-) neighbours. [`Mode::Paper`]: a neighbour joins if
 //!    `|K − mean K of the region| ≤ max_k_diff` (Gaussian curvature only, so regions leak across
-//!    creases, where K ≈ 0, see SPEC §3.1). [`Mode::Default`]: a neighbour joins if its curvedness
+//!    creases, where K ≈ 0, see docs/method.md §3.1). [`Mode::Default`]: a neighbour joins if its curvedness
 //!    ≤ `max_curvedness` and its local normal is within `max_slant_deg` of the line of sight
 //!    (seed and growth condition), its local normal is within `max_angle_deg` of the region's plane normal,
 //!    and its 3D point lies within `max(max_residual, residual_rms_ratio × RMS)` of the region's

@@ -1,6 +1,6 @@
 //! Cooperative relaxation of two edge sets by simulated annealing, and the final segmentation.
 //!
-//! SPEC §3.4. [`relax`] takes the region borders C1 (with a per-pixel strength s1, e.g. |K| or
+//! docs/method.md §3.4. [`relax`] takes the region borders C1 (with a per-pixel strength s1, e.g. |K| or
 //! curvedness) and the Canny edges C2 (with the gradient magnitude), removes the points of each
 //! set that the other does not support ([`prune`]), then minimises
 //! `E = Eⁱ + λ·Eᵉ` by simulated annealing over one-pixel moves of single points:
@@ -219,7 +219,7 @@ pub struct Energy {
     pub total: f64,
 }
 
-/// Removes unsupported edges (SPEC §3.4 step 1): every C2 point farther than `t_d_px` from C1,
+/// Removes unsupported edges (docs/method.md §3.4 step 1): every C2 point farther than `t_d_px` from C1,
 /// then every C1 point farther than `t_d_px` from the pruned C2. Exact Euclidean distances.
 ///
 /// # Panics
@@ -375,7 +375,7 @@ pub fn energy(
 }
 
 /// Prunes and relaxes C1 (region borders, strength `s1`) and C2 (Canny edges, strength
-/// `magnitude`) by simulated annealing (SPEC §3.4 steps 1–3; details in the crate docs).
+/// `magnitude`) by simulated annealing (docs/method.md §3.4 steps 1–3; details in the crate docs).
 /// Deterministic for a given `seed`; single-threaded.
 ///
 /// # Panics

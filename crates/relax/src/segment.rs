@@ -1,4 +1,4 @@
-//! The final segmentation from the relaxed edge map (SPEC §3.4 step 4), optionally guided by
+//! The final segmentation from the relaxed edge map (docs/method.md §3.4 step 4), optionally guided by
 //! the region-growing labels and merged where the relaxed edges do not support a border.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SegmentMode {
-    /// SPEC literal: connected components of valid non-edge pixels, filled by best plane.
+    /// The specification taken literally: connected components of valid non-edge pixels, filled by best plane.
     Components,
     /// Components that also never cross a region-growing border, then adjacent regions merged
     /// where the relaxed edges do not support their border and their planes agree.
@@ -57,7 +57,7 @@ pub struct SegmentParams {
     /// plane for a merge, in sensor units (ABW: about 1.3 units per range step).
     pub merge_max_residual: f64,
     /// Largest 3D distance of a filled pixel to the plane of the region it joins, in sensor units
-    /// (0 = no limit, SPEC literal). Farther pixels stay 0, so a small face that region growing
+    /// (0 = no limit, the specification taken literally). Farther pixels stay 0, so a small face that region growing
     /// dropped is not swallowed by its neighbour (which would make that neighbour an
     /// under-segmentation of both).
     pub fill_max_residual: f64,

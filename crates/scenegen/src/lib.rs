@@ -1,16 +1,16 @@
-//! Deterministic ABW-like synthetic range scenes with ground truth (SPEC §2.2).
+//! Deterministic ABW-like synthetic range scenes with ground truth (docs/method.md §2.2).
 //!
 //! [`generate`] lays out random polyhedra (boxes, wedges and ramps, roof prisms, pyramids and
 //! frustums, L-blocks, stairs, polygonal prisms, houses) on a table in front of a wall, some
 //! stacked, some flush against each other, a few tilted; ray-casts them through the ABW camera
-//! (the USF model of SPEC §2.1, which is a pinhole with depth `d = v/SCAL + OFFSET` along the
+//! (the USF model of docs/method.md §2.1, which is a pinhole with depth `d = v/SCAL + OFFSET` along the
 //! optical axis, so each planar face is intersected analytically per pixel); removes what a
 //! structured-light projector offset by a horizontal baseline cannot see (shadows); adds
 //! Gaussian depth noise, mixed pixels at jump edges and dropout blobs; and quantises to 8 bits.
 //!
 //! Ground truth follows the ABW rules: one label per connected visible piece of a plane,
 //! numbered from 10 in raster order of first appearance; 0 on no-data pixels and pieces under
-//! `min_region_px`. A mixed pixel keeps the label of the face its ray hit (SPEC §2.2: 0 only for
+//! `min_region_px`. A mixed pixel keeps the label of the face its ray hit (docs/method.md §2.2: 0 only for
 //! no data and small faces), so depth jumps are scored as boundaries wherever no shadow hides them. Coplanar faces that touch (an L-block's side, two boxes of the
 //! same height side by side) form one region, since no sensor can tell them apart.
 //!

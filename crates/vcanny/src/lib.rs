@@ -1,4 +1,4 @@
-//! Canny edge detection on vector fields (plane parameters) with the Di Zenzo tensor (SPEC §3.3).
+//! Canny edge detection on vector fields (plane parameters) with the Di Zenzo tensor (docs/method.md §3.3).
 //!
 //! [`detect`] runs on any stack of channels: each channel is smoothed with a Gaussian normalised over the valid
 //! pixels, differentiated with Sobel, and the channels are combined with the weighted Di Zenzo structure tensor
