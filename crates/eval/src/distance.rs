@@ -58,11 +58,12 @@ mod tests {
     }
 
     #[test]
-    fn dilate_is_inclusive() {
-        let mut m = Grid::new(7, 7, false);
+    fn dilate_is_the_shared_within_test() {
+        let mut m = Grid::new(9, 6, false);
         m[(3, 3)] = true;
-        let d = dilate(&m, 2.0);
-        assert!(d[(5, 3)] && d[(3, 1)] && !d[(5, 4)] && d[(4, 4)]);
-        assert_eq!(d.as_slice().iter().filter(|&&b| b).count(), 13);
+        m[(8, 0)] = true;
+        for t in [0.0, 1.0, 2.0, 2.5] {
+            assert_eq!(dilate(&m, t), rangeimage::distance::within(&m, t), "t = {t}");
+        }
     }
 }
