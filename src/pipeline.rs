@@ -110,7 +110,9 @@ pub fn finish(
         relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
     let edges = match config.pipeline.final_edges {
         FinalEdges::Relaxed => relaxed.edges.clone(),
-        FinalEdges::Segmentation => region_borders(&labels),
+        // The boundary rule eval scores segmentations by: region pixels next to another region, and
+        // unlabelled pixels between two regions; a region's edge against unlabelled pixels is no border.
+        FinalEdges::Segmentation => eval::boundary::label_boundaries(&labels, |l| l != 0),
     };
     Finish { relaxed, relax_info, labels, final_regions, edges }
 }
@@ -122,24 +124,4 @@ pub fn c1_strength(features: &SurfaceFeatures, which: C1Strength) -> Grid<f32> {
         C1Strength::Curvedness => features.curvedness.clone(),
     };
     src.map(|v| if v.is_finite() { *v } else { 0.0 })
-}
-
-/// The borders between the regions of `labels` (0 = none): a region pixel with a 4-neighbour in
-/// another region, and an unlabelled pixel whose 4-neighbours include two different regions (a
-/// one-pixel gap between two regions is their border). A region's edge against unlabelled pixels
-/// (no data, pixels the fill left out) is no border between two surfaces.
-pub fn region_borders(labels: &LabelImage) -> EdgeMap {
-    let (w, h) = labels.dimensions();
-    let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| l != 0);
-    Grid::from_fn(w, h, |x, y| {
-        let (x, y) = (i64::from(x), i64::from(y));
-        let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
-        match at(x, y) {
-            Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
-            None => {
-                let mut it = nb.iter().flatten();
-                it.next().is_some_and(|&first| it.any(|&m| m != first))
-            }
-        }
-    })
 }
