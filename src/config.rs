@@ -65,7 +65,7 @@ pub struct Config {
     /// Simulated-annealing relaxation of C1 and C2.
     pub relax: relax::Params,
     /// Final segmentation from the relaxed edge map.
-    pub segment: relax::SegmentParams,
+    pub segment: finalseg::Params,
 }
 
 /// A configuration file that could not be used.
@@ -111,7 +111,7 @@ impl Default for Config {
             raw_canny: vcanny_raw_preset(),
             regiongrow: regiongrow::Params::default(),
             relax: relax::Params::default(),
-            segment: relax::SegmentParams::default(),
+            segment: finalseg::Params::default(),
         }
     }
 }
@@ -130,7 +130,7 @@ impl Config {
         c.pipeline.final_edges = FinalEdges::Relaxed;
         c.relax.support_px = 0.0;
         c.regiongrow = regiongrow::Params::paper();
-        c.segment.mode = relax::SegmentMode::Components;
+        c.segment.mode = finalseg::Mode::Components;
         // Plain components have no region-growing borders to close their contours.
         c.segment.gap_close_px = 2.0;
         c.segment.min_region_px = 50;

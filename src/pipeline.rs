@@ -98,7 +98,14 @@ pub fn finish(
     let valid = rangeimage::valid_mask(range);
     let s1 = c1_strength(features, config.pipeline.c1_strength);
     let (relaxed, relax_info) = if config.pipeline.relax {
-        relax::relax(&regions.c1, &s1, &canny.edges, &canny.magnitude, &valid, &config.relax, config.seed)
+        let input = relax::Input {
+            c1: &regions.c1,
+            s1: &s1,
+            c2: &canny.edges,
+            magnitude: &canny.magnitude,
+            valid: &valid,
+        };
+        relax::relax(&input, &config.relax, config.seed)
     } else {
         let edges = relax::union(&regions.c1, &canny.edges);
         let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
@@ -107,7 +114,7 @@ pub fn finish(
     // The segmentation sees both relaxed sets in full (before the support test): a border between
     // two faces that region growing merged has only C2 to show it.
     let (labels, final_regions) =
-        relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
+        finalseg::segment(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
     let edges = match config.pipeline.final_edges {
         FinalEdges::Relaxed => relaxed.edges.clone(),
         // The boundary rule eval scores segmentations by: region pixels next to another region, and

@@ -1,4 +1,4 @@
-//! Cooperative relaxation of two edge sets by simulated annealing, and the final segmentation.
+//! Cooperative relaxation of two edge sets by simulated annealing.
 //!
 //! docs/method.md §3.4. [`relax`] takes the region borders C1 (with a per-pixel strength s1, e.g. |K| or
 //! curvedness) and the Canny edges C2 (with the gradient magnitude), removes the points of each
@@ -51,9 +51,6 @@
 //! energy_before` always.
 
 mod anneal;
-mod segment;
-
-pub use segment::{SegmentMode, SegmentParams, final_segmentation};
 
 use anneal::{DistanceTerm, NONE, State};
 use rand::SeedableRng;
@@ -156,7 +153,7 @@ pub struct Relaxed {
 
 impl Relaxed {
     /// C1 ∪ C2 of the annealed state, before the support test: the edges the final
-    /// segmentation sees (it needs only one cue per border, see [`final_segmentation`]).
+    /// segmentation sees (it needs only one cue per border, see `finalseg::segment`).
     pub fn union(&self) -> EdgeMap {
         union(&self.c1, &self.c2)
     }
@@ -374,21 +371,30 @@ pub fn energy(
     Energy { internal, external, total: internal + params.lambda * external }
 }
 
+/// What [`relax`] reconciles: the two edge sets of one image with their strengths, and the valid
+/// pixels (no point moves onto an invalid one). All grids have one size.
+#[derive(Debug, Clone, Copy)]
+pub struct Input<'a> {
+    /// C1, the region borders.
+    pub c1: &'a EdgeMap,
+    /// s1, the strength of each C1 point (|K| or curvedness; non-finite counts as 0).
+    pub s1: &'a Grid<f32>,
+    /// C2, the Canny edges.
+    pub c2: &'a EdgeMap,
+    /// |∇|, the strength of each C2 point (non-finite counts as 0).
+    pub magnitude: &'a Grid<f32>,
+    /// The valid pixels.
+    pub valid: &'a Grid<bool>,
+}
+
 /// Prunes and relaxes C1 (region borders, strength `s1`) and C2 (Canny edges, strength
 /// `magnitude`) by simulated annealing (docs/method.md §3.4 steps 1–3; details in the crate docs).
 /// Deterministic for a given `seed`; single-threaded.
 ///
 /// # Panics
 /// If the grids differ in size or `params` is invalid.
-pub fn relax(
-    c1: &EdgeMap,
-    s1: &Grid<f32>,
-    c2: &EdgeMap,
-    magnitude: &Grid<f32>,
-    valid: &Grid<bool>,
-    params: &Params,
-    seed: u64,
-) -> (Relaxed, Info) {
+pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
+    let Input { c1, s1, c2, magnitude, valid } = *input;
     let _s = tracing::info_span!("relax", w = c1.width(), h = c1.height()).entered();
     for (name, ok) in [
         ("s1", c1.same_size(s1)),
@@ -481,6 +487,13 @@ mod tests {
         pub(crate) c2: EdgeMap,
         pub(crate) mag: Grid<f32>,
         pub(crate) valid: Grid<bool>,
+    }
+
+    impl Case {
+        /// The case as the input of [`relax`].
+        pub(crate) fn input(&self) -> Input<'_> {
+            Input { c1: &self.c1, s1: &self.s1, c2: &self.c2, magnitude: &self.mag, valid: &self.valid }
+        }
     }
 
     pub(crate) fn random_case(w: u32, h: u32, seed: u64) -> Case {
@@ -688,7 +701,7 @@ mod tests {
     fn relax_reports_consistent_energies_and_keeps_point_counts() {
         let c = random_case(80, 60, 11);
         let params = Params::default();
-        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 5);
+        let (r, info) = relax(&c.input(), &params, 5);
         let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
         assert_eq!(count(&r.c1), count(&p1));
         assert_eq!(count(&r.c2), count(&p2));
@@ -731,7 +744,8 @@ mod tests {
         let ones = Grid::new(w, h, 1.0f32);
         let valid = Grid::new(w, h, true);
         let params = Params { lambda: 0.0, max_sweeps: 200, min_acceptance: 0.0, ..Params::default() };
-        let (_, info) = relax(&c1, &ones, &c2, &ones, &valid, &params, 1);
+        let (_, info) =
+            relax(&Input { c1: &c1, s1: &ones, c2: &c2, magnitude: &ones, valid: &valid }, &params, 1);
         assert_relative_eq!(info.e_internal_before, 40.0 * (2.0 + 3.0));
         assert!(info.e_internal_after < 0.5 * info.e_internal_before, "{info:?}");
     }
@@ -740,7 +754,7 @@ mod tests {
     fn same_seed_same_output_at_any_thread_count() {
         let c = random_case(64, 64, 21);
         let params = Params::default();
-        let run = |seed| relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+        let run = |seed| relax(&c.input(), &params, seed);
         let (r0, i0) = run(9);
         for threads in [1, 2, 3] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
@@ -763,8 +777,11 @@ mod tests {
         let valid = Grid::new(w, h, true);
         let base = Params { t_d_px: 5.0, max_sweeps: 0, ..Params::default() };
         for (support, want_x) in [(2.0, vec![10, 11]), (4.0, vec![10, 11, 14]), (0.0, vec![10, 11, 14])] {
-            let (r, info) =
-                relax(&c1, &ones, &c2, &ones, &valid, &Params { support_px: support, ..base.clone() }, 0);
+            let (r, info) = relax(
+                &Input { c1: &c1, s1: &ones, c2: &c2, magnitude: &ones, valid: &valid },
+                &Params { support_px: support, ..base.clone() },
+                0,
+            );
             assert_eq!(r.c2, c2, "support {support}: the annealed C2 keeps every point");
             let want = Grid::from_fn(w, h, |x, _| want_x.contains(&x));
             assert_eq!(r.edges, want, "support {support}");
@@ -776,7 +793,7 @@ mod tests {
     fn zero_sweeps_only_prunes() {
         let c = random_case(50, 50, 4);
         let params = Params { max_sweeps: 0, ..Params::default() };
-        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 0);
+        let (r, info) = relax(&c.input(), &params, 0);
         let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
         assert_eq!((r.c1, r.c2), (p1, p2));
         assert_eq!(info.energy_after, info.energy_before);
@@ -787,7 +804,11 @@ mod tests {
     fn empty_input_is_fine() {
         let e = Grid::new(8, 6, false);
         let z = Grid::new(8, 6, 0.0f32);
-        let (r, info) = relax(&e, &z, &e, &z, &Grid::new(8, 6, true), &Params::default(), 0);
+        let (r, info) = relax(
+            &Input { c1: &e, s1: &z, c2: &e, magnitude: &z, valid: &Grid::new(8, 6, true) },
+            &Params::default(),
+            0,
+        );
         assert_eq!(count(&r.edges), 0);
         assert_eq!(info.energy_after, 0.0);
     }
@@ -818,7 +839,7 @@ mod tests {
             ) {
                 let c = random_case(w, h, seed);
                 let params = Params { t_d_px: t_d, lambda, t0, normalize, max_sweeps: 15, ..Params::default() };
-                let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+                let (r, info) = relax(&c.input(), &params, seed);
                 prop_assert!(info.energy_after <= info.energy_before, "{:?}", info);
                 let (p1, p2) = prune(&c.c1, &c.c2, t_d);
                 let e = energy(&r.c1, &c.s1, &r.c2, &c.mag, &p1, &p2, &params);
