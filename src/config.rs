@@ -21,7 +21,7 @@ pub enum FinalEdges {
     /// The relaxed edge sets: C1 ∪ the supported relaxed C2 (the paper; C1 and C2 often run as two
     /// parallel lines along one boundary).
     Relaxed,
-    /// The borders between the final segmentation's regions ([`eval::boundary::label_boundaries`], every
+    /// The borders between the final segmentation's regions ([`rangeimage::boundary::label_boundaries`], every
     /// non-zero label a region): one boundary per pair of final regions, shaped by both edge sets through
     /// the segmentation.
     #[default]

@@ -119,7 +119,7 @@ pub fn finish(
         FinalEdges::Relaxed => relaxed.edges.clone(),
         // The boundary rule eval scores segmentations by: region pixels next to another region, and
         // unlabelled pixels between two regions; a region's edge against unlabelled pixels is no border.
-        FinalEdges::Segmentation => eval::boundary::label_boundaries(&labels, |l| l != 0),
+        FinalEdges::Segmentation => rangeimage::boundary::label_boundaries(&labels, |l| l != 0),
     };
     Finish { relaxed, relax_info, labels, final_regions, edges }
 }

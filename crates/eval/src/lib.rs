@@ -122,7 +122,7 @@ impl<'a> Inputs<'a> {
 pub enum BoundarySource {
     /// The edge map given as input.
     Edges,
-    /// The segmentation's own region boundaries ([`boundary::label_boundaries`]).
+    /// The segmentation's own region boundaries ([`rangeimage::boundary::label_boundaries`]).
     Segmentation,
 }
 
@@ -186,7 +186,10 @@ pub fn score(inputs: &Inputs<'_>, params: &Params) -> Scores {
         (Some(e), _) => Some((e.clone(), BoundarySource::Edges)),
         (None, Some(seg)) => {
             let conv = params.seg_convention.resolve(seg);
-            Some((boundary::label_boundaries(seg, |l| conv.is_region(l)), BoundarySource::Segmentation))
+            Some((
+                rangeimage::boundary::label_boundaries(seg, |l| conv.is_region(l)),
+                BoundarySource::Segmentation,
+            ))
         }
         (None, None) => None,
     };

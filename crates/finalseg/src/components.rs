@@ -1,14 +1,7 @@
 //! Step 1 of the final segmentation: 4-connected components of the core pixels, by two-pass
 //! union-find labelling.
 
-/// The root of `a`'s set in the union-find forest `parent` (path halving).
-pub(crate) fn find(parent: &mut [u32], mut a: u32) -> u32 {
-    while parent[a as usize] != a {
-        parent[a as usize] = parent[parent[a as usize] as usize];
-        a = parent[a as usize];
-    }
-    a
-}
+use rangeimage::union_find::find;
 
 /// 4-connected components of the `core` pixels, two neighbours connected only if their
 /// `guide` labels are equal: (component per pixel, 0 = none, numbered from 1 in raster order

@@ -11,8 +11,10 @@ mod plane;
 
 pub use params::{Mode, Params};
 
-use components::{components, count_labels, find};
-use plane::{Moments, Plane, fit_plane};
+use components::{components, count_labels};
+use plane::{Plane, fit_plane};
+use planefit::Moments;
+use rangeimage::union_find::find;
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 
 /// Labels the image from the final edge map `edges` (C = C1 ∪ C2).

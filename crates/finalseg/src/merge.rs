@@ -1,10 +1,11 @@
 //! Step 4 of the final segmentation (`regions` mode): adjacent regions merged over borders the
 //! edges do not support, or inside one region-growing region, where their planes agree.
 
-use crate::components::find;
-use crate::plane::{Moments, Plane, fit_plane};
+use crate::plane::{Plane, fit_plane, mean_sq_residual};
 use crate::{Params, Pieces, Scene};
+use planefit::Moments;
 use rangeimage::EdgeMap;
+use rangeimage::union_find::find;
 use std::collections::BTreeMap;
 
 /// Per adjacent pair of components (smaller label, larger label): (border pixel count, count of
@@ -161,7 +162,7 @@ impl PlaneTest {
     /// is `weak`ly supported or not.
     fn agree(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, weak: bool) -> bool {
         let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
-        let (ea, eb) = (ma.mean_sq_residual(pb), mb.mean_sq_residual(pa));
+        let (ea, eb) = (mean_sq_residual(ma, pb), mean_sq_residual(mb, pa));
         if dot.abs() < self.cos_max || ea > self.r2 || eb > self.r2 {
             return false;
         }

@@ -3,10 +3,12 @@
 //! Pixel `(x, y)` is `data[y * width + x]`: x is the column, y the row, row 0 at the top.
 //! This crate does no I/O and depends on no math or image crate, so every stage can use it.
 
+pub mod boundary;
 mod camera;
 pub mod distance;
 mod grid;
 mod types;
+pub mod union_find;
 
 #[cfg(feature = "testing")]
 pub mod testing;

@@ -2,6 +2,7 @@
 
 use crate::plane::{Moments, Plane, dot};
 use crate::{Mode, Params};
+use rangeimage::union_find::find;
 
 /// Statistics of one region, accumulated in raster order (so they do not depend on label values).
 #[derive(Debug, Clone, Copy, Default)]
@@ -182,7 +183,7 @@ pub(crate) fn merge<const N: usize>(
 ) -> Merged {
     let mut stats = region_stats(labels, max_label, pts, k);
     let crit = Criterion::new(params);
-    let fit = |s: &Stats| if crit.paper { None } else { s.mom.fit(toward) };
+    let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
     let mut planes: Vec<Option<Plane>> =
         stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }).collect();
     let mut parent: Vec<u32> = (0..=max_label).collect();
@@ -240,15 +241,6 @@ pub(crate) fn merge<const N: usize>(
     }
     pairs.sort_unstable();
     pairs.dedup();
-
-    fn find(parent: &mut [u32], mut a: u32) -> u32 {
-        while parent[a as usize] != a {
-            let g = parent[parent[a as usize] as usize];
-            parent[a as usize] = g;
-            a = g;
-        }
-        a
-    }
 
     let mut n_merged = 0;
     let mut n_passes = 0;
