@@ -154,8 +154,8 @@ fn main() -> Result<()> {
             _ => bail!("unknown argument {a}"),
         }
     }
-    params.validate().map_err(anyhow::Error::msg)?;
-    sp.validate().map_err(anyhow::Error::msg)?;
+    params.validate()?;
+    sp.validate()?;
     let only: Option<u32> = match std::env::var("ONLY") {
         Ok(v) => Some(v.parse().with_context(|| format!("ONLY={v:?}: not an image index"))?),
         Err(_) => None,

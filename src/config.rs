@@ -47,7 +47,7 @@ impl Default for PipelineParams {
 }
 
 /// The whole configuration: one table per stage, as in `configs/default.toml`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
     /// Seed of every random choice (region seeds, annealing moves).
@@ -59,7 +59,7 @@ pub struct Config {
     /// Canny on plane parameters (C2).
     pub vcanny: vcanny::Params,
     /// The raw-depth Canny baseline of Table I (same detector, one channel, its own thresholds).
-    pub raw_canny: vcanny::Params,
+    pub raw_canny: RawCannyParams,
     /// Multi-seed region growing (regions and C1).
     pub regiongrow: regiongrow::Params,
     /// Simulated-annealing relaxation of C1 and C2.
@@ -90,30 +90,15 @@ pub enum ConfigError {
         message: String,
     },
     /// A value is out of its allowed range.
-    #[error("{}: [{table}] {message}", path.display())]
+    #[error("{}: [{table}] {error}", path.display())]
     Invalid {
         /// The configuration file.
         path: PathBuf,
         /// The table holding the bad value.
         table: &'static str,
-        /// What is wrong.
-        message: String,
+        /// The field and what is wrong with it.
+        error: rangeimage::ParamError,
     },
-}
-
-impl Default for Config {
-    fn default() -> Self {
-        Self {
-            seed: 0,
-            pipeline: PipelineParams::default(),
-            features: features::Params::default(),
-            vcanny: vcanny::Params::default(),
-            raw_canny: vcanny_raw_preset(),
-            regiongrow: regiongrow::Params::default(),
-            relax: relax::Params::default(),
-            segment: finalseg::Params::default(),
-        }
-    }
 }
 
 impl Config {
@@ -154,6 +139,12 @@ impl Config {
         let config: Config = toml::from_str(text)
             .map_err(|e| ConfigError::Parse { path: path.into(), message: e.to_string() })?;
         config.validate(path)?;
+        if config.raw_canny.weights.is_some() {
+            tracing::warn!(
+                "{}: [raw_canny] weights is deprecated and ignored (the raw-depth detector has one channel)",
+                path.display()
+            );
+        }
         Ok(config)
     }
 
@@ -169,11 +160,11 @@ impl Config {
     /// Checks every stage's values; the error names the table and the problem.
     pub fn validate(&self, path: &Path) -> Result<(), ConfigError> {
         let bad = |table: &'static str| {
-            move |message: String| ConfigError::Invalid { path: path.into(), table, message }
+            move |error: rangeimage::ParamError| ConfigError::Invalid { path: path.into(), table, error }
         };
         self.features.validate().map_err(bad("features"))?;
         self.vcanny.validate().map_err(bad("vcanny"))?;
-        self.raw_canny.validate().map_err(bad("raw_canny"))?;
+        self.raw_canny.detector().validate().map_err(bad("raw_canny"))?;
         self.regiongrow.validate().map_err(bad("regiongrow"))?;
         self.relax.validate().map_err(bad("relax"))?;
         self.segment.validate().map_err(bad("segment"))?;
@@ -188,14 +179,49 @@ impl Config {
 
 /// The raw-depth Canny baseline's thresholds (2 and 4 times the noise level of the magnitude), the best found on
 /// the training split by `cargo run --release --example table1 -- --tune`.
-fn vcanny_raw_preset() -> vcanny::Params {
-    vcanny::Params {
-        thresholds: vcanny::Thresholds {
-            mode: vcanny::ThresholdMode::NoiseRelative,
-            low: 2.0,
-            high: 4.0,
-            ..Default::default()
-        },
-        ..Default::default()
+/// The `[raw_canny]` table: the raw-depth Canny baseline of Table I. It runs the detector of `[vcanny]` on one
+/// channel (the depth), so it has no channel weights.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RawCannyParams {
+    /// Gaussian σ in pixels.
+    pub sigma_px: f32,
+    /// Gaussian kernel width in pixels (odd).
+    pub kernel_px: u32,
+    /// Hysteresis thresholds.
+    pub thresholds: vcanny::Thresholds,
+    /// Deprecated and ignored (the one depth channel has weight 1); read so that older files still load,
+    /// with a warning, and never written.
+    #[serde(skip_serializing)]
+    pub weights: Option<[f32; 3]>,
+}
+
+impl Default for RawCannyParams {
+    fn default() -> Self {
+        let v = vcanny::Params::default();
+        Self {
+            sigma_px: v.sigma_px,
+            kernel_px: v.kernel_px,
+            thresholds: vcanny::Thresholds {
+                mode: vcanny::ThresholdMode::NoiseRelative,
+                low: 2.0,
+                high: 4.0,
+                ..Default::default()
+            },
+            weights: None,
+        }
+    }
+}
+
+impl RawCannyParams {
+    /// The detector's parameters for `vcanny::detect_raw` (the channel weights of `vcanny::Params` are
+    /// not read by it).
+    pub fn detector(&self) -> vcanny::Params {
+        vcanny::Params {
+            sigma_px: self.sigma_px,
+            kernel_px: self.kernel_px,
+            thresholds: self.thresholds.clone(),
+            ..vcanny::Params::default()
+        }
     }
 }

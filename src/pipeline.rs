@@ -3,6 +3,7 @@
 use crate::config::{C1Strength, Config, FinalEdges};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 use serde::Serialize;
+use std::path::Path;
 use std::time::Instant;
 
 /// Wall-clock time spent in each stage, in milliseconds.
@@ -61,9 +62,21 @@ fn elapsed_ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// Panics with the configuration error if `config` is invalid: the facade's entry points check the
+/// parameters once here, the stages only in debug builds.
+fn check(config: &Config, entry: &str) {
+    if let Err(e) = config.validate(Path::new("configuration")) {
+        panic!("rangeseg::{entry}: {e}");
+    }
+}
+
 /// Runs the whole method on one range image.
+///
+/// # Panics
+/// If `config` is invalid ([`Config::validate`]; [`Config::load`] returns only valid ones).
 pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
     let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
+    check(config, "segment");
     let t = Instant::now();
     let features = features::compute(range, &config.features);
     let t_features = elapsed_ms(t);
@@ -78,7 +91,7 @@ pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
     let t_canny = elapsed_ms(t);
 
     let t = Instant::now();
-    let fin = finish(range, camera, config, &features, &regions, &canny);
+    let fin = finish_checked(range, camera, config, &features, &regions, &canny);
     let t_relax = elapsed_ms(t);
 
     let timings =
@@ -87,7 +100,23 @@ pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
 }
 
 /// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
+///
+/// # Panics
+/// If `config` is invalid ([`Config::validate`]).
 pub fn finish(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &Config,
+    features: &SurfaceFeatures,
+    regions: &regiongrow::Segmentation,
+    canny: &vcanny::Edges,
+) -> Finish {
+    check(config, "finish");
+    finish_checked(range, camera, config, features, regions, canny)
+}
+
+/// [`finish`] with `config` already checked.
+fn finish_checked(
     range: &RangeImage,
     camera: &Camera,
     config: &Config,

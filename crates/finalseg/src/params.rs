@@ -1,5 +1,7 @@
 //! The `[segment]` parameters of the final segmentation.
 
+use rangeimage::ParamError;
+
 /// How [`segment`](crate::segment) forms its regions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -77,41 +79,44 @@ impl Default for Params {
 
 impl Params {
     /// Checks the values; the error names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if self.min_region_px == 0 {
-            return Err("segment.min_region_px must be ≥ 1".to_owned());
+            return Err(ParamError::new("segment.min_region_px", "must be ≥ 1"));
         }
         if !(self.gap_close_px.is_finite() && (0.0..=64.0).contains(&self.gap_close_px)) {
-            return Err(format!("segment.gap_close_px must be in 0..=64, got {}", self.gap_close_px));
+            return Err(ParamError::new(
+                "segment.gap_close_px",
+                format!("must be in 0..=64, got {}", self.gap_close_px),
+            ));
         }
         if !(0.0..=1.0).contains(&self.min_border_support) {
-            return Err(format!(
-                "segment.min_border_support must be in 0..=1, got {}",
-                self.min_border_support
+            return Err(ParamError::new(
+                "segment.min_border_support",
+                format!("must be in 0..=1, got {}", self.min_border_support),
             ));
         }
         if !(self.within_max_rms_ratio.is_finite() && self.within_max_rms_ratio >= 1.0) {
-            return Err(format!(
-                "segment.within_max_rms_ratio must be finite and ≥ 1, got {}",
-                self.within_max_rms_ratio
+            return Err(ParamError::new(
+                "segment.within_max_rms_ratio",
+                format!("must be finite and ≥ 1, got {}", self.within_max_rms_ratio),
             ));
         }
         if !(0.0..=90.0).contains(&self.merge_max_angle_deg) {
-            return Err(format!(
-                "segment.merge_max_angle_deg must be in 0..=90, got {}",
-                self.merge_max_angle_deg
+            return Err(ParamError::new(
+                "segment.merge_max_angle_deg",
+                format!("must be in 0..=90, got {}", self.merge_max_angle_deg),
             ));
         }
         if !(self.fill_max_residual.is_finite() && self.fill_max_residual >= 0.0) {
-            return Err(format!(
-                "segment.fill_max_residual must be finite and ≥ 0, got {}",
-                self.fill_max_residual
+            return Err(ParamError::new(
+                "segment.fill_max_residual",
+                format!("must be finite and ≥ 0, got {}", self.fill_max_residual),
             ));
         }
         if !(self.merge_max_residual.is_finite() && self.merge_max_residual >= 0.0) {
-            return Err(format!(
-                "segment.merge_max_residual must be finite and ≥ 0, got {}",
-                self.merge_max_residual
+            return Err(ParamError::new(
+                "segment.merge_max_residual",
+                format!("must be finite and ≥ 0, got {}", self.merge_max_residual),
             ));
         }
         Ok(())

@@ -7,6 +7,7 @@ pub mod boundary;
 mod camera;
 pub mod distance;
 mod grid;
+mod params;
 mod types;
 pub mod union_find;
 
@@ -15,6 +16,7 @@ pub mod testing;
 
 pub use camera::{AbwCalibration, Camera};
 pub use grid::Grid;
+pub use params::ParamError;
 pub use types::{EdgeMap, LabelImage, NormalMap, PlaneMap, RangeImage, Region, SurfaceFeatures, valid_mask};
 
 /// Builds a [`RangeImage`] from rows of literals: `range_image![1.0, 2.0; f32::NAN, 3.0]`.

@@ -54,7 +54,7 @@ mod anneal;
 
 use anneal::{DistanceTerm, NONE, State};
 use rand::SeedableRng;
-use rangeimage::{EdgeMap, Grid, distance};
+use rangeimage::{EdgeMap, Grid, ParamError, distance};
 
 /// The `[relax]` table: pruning distance, energy weight and annealing schedule.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -105,30 +105,45 @@ impl Default for Params {
 
 impl Params {
     /// Checks the values; the error names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if !(self.t_d_px.is_finite() && (0.0..=64.0).contains(&self.t_d_px)) {
-            return Err(format!("relax.t_d_px must be in 0..=64, got {}", self.t_d_px));
+            return Err(ParamError::new("relax.t_d_px", format!("must be in 0..=64, got {}", self.t_d_px)));
         }
         if !(self.lambda.is_finite() && self.lambda >= 0.0) {
-            return Err(format!("relax.lambda must be finite and ≥ 0, got {}", self.lambda));
+            return Err(ParamError::new(
+                "relax.lambda",
+                format!("must be finite and ≥ 0, got {}", self.lambda),
+            ));
         }
         if !(self.t0.is_finite() && self.t0 >= 0.0) {
-            return Err(format!("relax.t0 must be finite and ≥ 0 (0 = automatic), got {}", self.t0));
+            return Err(ParamError::new(
+                "relax.t0",
+                format!("must be finite and ≥ 0 (0 = automatic), got {}", self.t0),
+            ));
         }
         if !(self.auto_t0_acceptance > 0.0 && self.auto_t0_acceptance < 1.0) {
-            return Err(format!(
-                "relax.auto_t0_acceptance must be in (0, 1), got {}",
-                self.auto_t0_acceptance
+            return Err(ParamError::new(
+                "relax.auto_t0_acceptance",
+                format!("must be in (0, 1), got {}", self.auto_t0_acceptance),
             ));
         }
         if !(self.cooling_delta > 0.0 && self.cooling_delta < 1.0) {
-            return Err(format!("relax.cooling_delta must be in (0, 1), got {}", self.cooling_delta));
+            return Err(ParamError::new(
+                "relax.cooling_delta",
+                format!("must be in (0, 1), got {}", self.cooling_delta),
+            ));
         }
         if !(0.0..=1.0).contains(&self.min_acceptance) {
-            return Err(format!("relax.min_acceptance must be in 0..=1, got {}", self.min_acceptance));
+            return Err(ParamError::new(
+                "relax.min_acceptance",
+                format!("must be in 0..=1, got {}", self.min_acceptance),
+            ));
         }
         if !(self.support_px.is_finite() && (0.0..=64.0).contains(&self.support_px)) {
-            return Err(format!("relax.support_px must be in 0..=64 (0 = no test), got {}", self.support_px));
+            return Err(ParamError::new(
+                "relax.support_px",
+                format!("must be in 0..=64 (0 = no test), got {}", self.support_px),
+            ));
         }
         Ok(())
     }
@@ -163,6 +178,7 @@ impl Relaxed {
 ///
 /// # Panics
 /// If the sizes differ.
+#[must_use]
 pub fn union(a: &EdgeMap, b: &EdgeMap) -> EdgeMap {
     assert!(a.same_size(b), "edge maps differ in size");
     let mut u = a.clone();
@@ -221,6 +237,7 @@ pub struct Energy {
 ///
 /// # Panics
 /// If the maps differ in size.
+#[must_use]
 pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
     assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
     let p2 = within(c2, c1, t_d_px);
@@ -338,6 +355,7 @@ fn external_sum(c1: &EdgeMap, s1: &Grid<f32>, c2: &EdgeMap, mag: &Grid<f32>) -> 
 ///
 /// # Panics
 /// If the grids differ in size.
+#[must_use]
 pub fn energy(
     c1: &EdgeMap,
     s1: &Grid<f32>,
@@ -392,7 +410,8 @@ pub struct Input<'a> {
 /// Deterministic for a given `seed`; single-threaded.
 ///
 /// # Panics
-/// If the grids differ in size or `params` is invalid.
+/// If the grids differ in size; in debug builds also if `params` is invalid ([`Params::validate`]).
+#[must_use]
 pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
     let Input { c1, s1, c2, magnitude, valid } = *input;
     let _s = tracing::info_span!("relax", w = c1.width(), h = c1.height()).entered();
@@ -404,9 +423,7 @@ pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
     ] {
         assert!(ok, "relax::relax: {name} differs in size from c1");
     }
-    if let Err(e) = params.validate() {
-        panic!("relax::relax: invalid params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "relax::relax: invalid params");
     let count = |m: &EdgeMap| m.as_slice().iter().filter(|&&b| b).count() as u32;
     let (p1, p2) = prune(c1, c2, params.t_d_px);
     let mut info =
