@@ -171,9 +171,34 @@ impl Config {
         Ok(())
     }
 
-    /// The configuration as TOML text (what `configs/default.toml` holds).
+    /// The configuration as TOML text.
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("a Config always serialises")
+    }
+
+    /// [`to_toml`](Self::to_toml) with a one-line comment above every table and key (`KEY_DOCS`):
+    /// what `configs/default.toml` holds and `rangeseg config` prints.
+    pub fn to_commented_toml(&self) -> String {
+        let mut out = String::new();
+        let mut table = String::new();
+        for line in self.to_toml().lines() {
+            let t = line.trim();
+            let key = if let Some(name) = t.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+                table = name.to_owned();
+                Some(table.clone())
+            } else {
+                t.split_once(" = ")
+                    .map(|(k, _)| if table.is_empty() { k.to_owned() } else { format!("{table}.{k}") })
+            };
+            if let Some(doc) = key.as_deref().and_then(key_doc) {
+                out.push_str("# ");
+                out.push_str(doc);
+                out.push('\n');
+            }
+            out.push_str(line);
+            out.push('\n');
+        }
+        out
     }
 }
 
@@ -223,5 +248,212 @@ impl RawCannyParams {
             thresholds: self.thresholds.clone(),
             ..vcanny::Params::default()
         }
+    }
+}
+
+/// One-line comments of every key of the configuration file, by `table.key` (`key` for the top
+/// level), written above each key by [`Config::to_commented_toml`]. The tables hold the stage
+/// parameters; the Rust docs of each `Params` field say more.
+const KEY_DOCS: &[(&str, &str)] = &[
+    ("seed", "Seed of every random choice (region seeds, annealing moves)."),
+    ("pipeline", "Options of the pipeline itself."),
+    (
+        "pipeline.c1_strength",
+        "Strength s1 of C1 points in the relaxation energy: \"curvedness\" or \"abs_k\" (|K|, the paper).",
+    ),
+    ("pipeline.relax", "Run the relaxation (false: the relaxed edge sets are C1 and C2 as detected)."),
+    (
+        "pipeline.final_edges",
+        "Final edge map C: \"segmentation\" (the final regions' borders) or \"relaxed\" (C1 ∪ supported C2, the paper).",
+    ),
+    ("features", "Local planes, derivatives and curvatures (window sides in pixels, odd)."),
+    ("features.window_px", "Window of the local plane fit (odd, ≥ 3)."),
+    ("features.deriv_window_px", "Window of the quadratic (derivative) fit (odd, ≥ 3)."),
+    ("features.k_std_window_px", "Window of the standard deviation of K (odd, ≥ 1)."),
+    ("vcanny", "Canny on the plane parameters (C2)."),
+    ("vcanny.sigma_px", "Standard deviation of the Gaussian smoothing, in pixels."),
+    ("vcanny.kernel_px", "Side of the Gaussian mask (odd)."),
+    (
+        "vcanny.weights",
+        "Weights of the plane channels [a, b, c] in the structure tensor (c, the intercept, is noisy).",
+    ),
+    ("vcanny.thresholds", "Hysteresis thresholds."),
+    (
+        "vcanny.thresholds.mode",
+        "How low and high are read: \"noise_relative\" (multiples of the noise estimate), \"absolute\" or \"quantile\".",
+    ),
+    ("vcanny.thresholds.low", "Weak threshold: edge pixels connected to a strong one need at least this."),
+    ("vcanny.thresholds.high", "Strong threshold: edges start at pixels with at least this."),
+    (
+        "vcanny.thresholds.noise_floor",
+        "Lower bound of the noise estimate in noise_relative mode (noise-free images).",
+    ),
+    ("raw_canny", "The raw-depth Canny baseline of Table I: the same detector on the depth alone."),
+    ("raw_canny.sigma_px", "Standard deviation of the Gaussian smoothing, in pixels."),
+    ("raw_canny.kernel_px", "Side of the Gaussian mask (odd)."),
+    ("raw_canny.thresholds", "Hysteresis thresholds."),
+    (
+        "raw_canny.thresholds.mode",
+        "How low and high are read: \"noise_relative\", \"absolute\" or \"quantile\".",
+    ),
+    ("raw_canny.thresholds.low", "Weak threshold."),
+    ("raw_canny.thresholds.high", "Strong threshold."),
+    ("raw_canny.thresholds.noise_floor", "Lower bound of the noise estimate in noise_relative mode."),
+    ("regiongrow", "Multi-seed region growing (regions and their borders C1); distances in camera units."),
+    (
+        "regiongrow.mode",
+        "Homogeneity criterion: \"default\" (curvedness and plane consistency) or \"paper\" (Gaussian curvature).",
+    ),
+    ("regiongrow.t_sigma", "T_σ: a seed is accepted only where the std of K over its window is ≤ this."),
+    (
+        "regiongrow.t_m",
+        "T_m (paper mode): adjacent regions merge only if their mean K differ by less than this.",
+    ),
+    ("regiongrow.min_seeds", "Minimum number of seeds (t_sigma is relaxed to reach it)."),
+    ("regiongrow.max_seeds", "Maximum number of seeds (regions grown)."),
+    ("regiongrow.max_k_diff", "Paper mode: a pixel joins if |K − the region's mean K| ≤ this."),
+    ("regiongrow.max_curvedness", "Default mode: a pixel grows (or seeds) only if its curvedness is ≤ this."),
+    (
+        "regiongrow.max_angle_deg",
+        "Default mode: largest angle between a pixel's normal and the region's normal.",
+    ),
+    (
+        "regiongrow.max_residual",
+        "Default mode: largest distance of a pixel's 3D point to the region's plane.",
+    ),
+    (
+        "regiongrow.residual_rms_ratio",
+        "Default mode: the residual limit is max(max_residual, this × the region's own RMS); 0 = max_residual alone.",
+    ),
+    (
+        "regiongrow.max_slant_deg",
+        "Default mode: a pixel's normal must be within this angle of the direction to the sensor.",
+    ),
+    (
+        "regiongrow.refit_every_px",
+        "Default mode: the region plane is refitted after max(this, n / 4) additions.",
+    ),
+    (
+        "regiongrow.merge_max_angle_deg",
+        "Default mode: adjacent regions merge only if their normals are within this angle.",
+    ),
+    (
+        "regiongrow.merge_max_residual",
+        "Default mode: adjacent regions merge only if each one's RMS distance to the other's plane is ≤ this.",
+    ),
+    ("regiongrow.min_region_px", "Regions with fewer pixels become unlabelled (0)."),
+    ("regiongrow.connectivity", "Neighbourhood of growth and of the region adjacency graph: 4 or 8."),
+    (
+        "regiongrow.fill_unlabelled",
+        "Give left-over valid pixels to the adjacent region whose plane fits them.",
+    ),
+    ("regiongrow.fill_max_residual", "Largest plane distance for fill_unlabelled."),
+    ("regiongrow.c1_one_sided", "C1 one pixel thick (one side of each border) instead of both sides."),
+    ("regiongrow.seed_stride_px", "Seed candidates on every n-th pixel in x and y (1 = all pixels)."),
+    (
+        "regiongrow.seed_radius_px",
+        "A seed needs its (2r+1)² window growable and passing the growth test (r = this; 0 = no test).",
+    ),
+    ("relax", "Simulated-annealing relaxation of C1 and C2 (docs/method.md §3.4)."),
+    ("relax.t_d_px", "T_d: points of one set farther than this from the other set are removed (pixels)."),
+    ("relax.lambda", "λ, the weight of the external (edge strength) energy against the distance energy."),
+    ("relax.t0", "Initial temperature; 0 = automatic (see auto_t0_acceptance)."),
+    (
+        "relax.auto_t0_acceptance",
+        "With t0 = 0: probability of accepting a mean uphill move at the start, in (0, 1).",
+    ),
+    ("relax.cooling_delta", "δ of the geometric cooling T ← (1 − δ)·T per sweep, in (0, 1)."),
+    ("relax.min_acceptance", "Stop after a sweep whose fraction of accepted moves is below this."),
+    ("relax.max_sweeps", "Upper bound on the number of sweeps (0 = prune only)."),
+    ("relax.normalize", "Divide s1 and |∇| by their means over the initial sets (λ becomes unitless)."),
+    (
+        "relax.support_px",
+        "Relaxed C2 points farther than this from the pruned C1 leave the final edge map (pixels; 0 = keep all).",
+    ),
+    ("segment", "The final segmentation from the relaxed edges (crate finalseg); distances in camera units."),
+    (
+        "segment.mode",
+        "\"regions\" (guided by the region-growing labels, then merged) or \"components\" (connected components, the paper).",
+    ),
+    (
+        "segment.min_region_px",
+        "Components of core pixels smaller than this are dropped (their pixels are filled like edge pixels).",
+    ),
+    (
+        "segment.gap_close_px",
+        "Core pixels are farther than this from every edge pixel (0 = every non-edge pixel).",
+    ),
+    (
+        "segment.unlabelled_core",
+        "Regions mode: pixels region growing left unlabelled may be core pixels too.",
+    ),
+    (
+        "segment.min_border_support",
+        "Regions mode: adjacent regions may merge if less than this fraction of their border lies at edges.",
+    ),
+    (
+        "segment.merge_within_region",
+        "Regions mode: pieces of one region-growing region merge when their planes agree, whatever the edges.",
+    ),
+    (
+        "segment.within_max_rms_ratio",
+        "Regions mode: such pieces merge only if each one's RMS to the other's plane ≤ this × its own RMS (≥ 1).",
+    ),
+    (
+        "segment.merge_max_angle_deg",
+        "Regions mode: largest angle between the two regions' plane normals for a merge.",
+    ),
+    (
+        "segment.merge_max_residual",
+        "Regions mode: largest RMS distance of each region's points to the other's plane for a merge.",
+    ),
+    ("segment.fill_max_residual", "Largest distance of a filled pixel to its region's plane (0 = no limit)."),
+];
+
+/// The comment of `key` (`table.key`) in [`KEY_DOCS`].
+fn key_doc(key: &str) -> Option<&'static str> {
+    KEY_DOCS.iter().find(|(k, _)| *k == key).map(|(_, d)| *d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The tables and keys of a configuration's TOML text, as `table.key`.
+    fn keys(text: &str) -> Vec<String> {
+        let mut table = String::new();
+        let mut keys = Vec::new();
+        for t in text.lines().map(str::trim) {
+            if let Some(name) = t.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+                table = name.to_owned();
+                keys.push(table.clone());
+            } else if let Some((k, _)) = t.split_once(" = ") {
+                keys.push(if table.is_empty() { k.to_owned() } else { format!("{table}.{k}") });
+            }
+        }
+        keys
+    }
+
+    #[test]
+    fn every_key_has_one_comment_and_every_comment_a_key() {
+        let keys = keys(&Config::default().to_toml());
+        for k in &keys {
+            assert!(key_doc(k).is_some(), "no comment for `{k}` in KEY_DOCS");
+        }
+        for (k, _) in KEY_DOCS {
+            assert!(keys.iter().any(|x| x == k), "KEY_DOCS has `{k}`, which the configuration has not");
+        }
+        let commented = Config::default().to_commented_toml();
+        assert_eq!(commented.lines().filter(|l| l.starts_with("# ")).count(), keys.len());
+        assert_eq!(Config::from_toml(&commented, Path::new("x.toml")).unwrap(), Config::default());
+    }
+
+    #[test]
+    fn old_raw_canny_weights_load_and_are_not_written() {
+        let c = Config::from_toml("[raw_canny]\nweights = [1.0, 1.0, 0.0]\n", Path::new("old.toml")).unwrap();
+        assert_eq!(c.raw_canny.weights, Some([1.0, 1.0, 0.0]));
+        assert_eq!(c.raw_canny.detector(), Config::default().raw_canny.detector());
+        assert!(!c.to_toml().contains("weights = [1.0, 1.0, 0.0]\n\n[raw_canny.thresholds]"));
+        assert!(!keys(&c.to_toml()).contains(&"raw_canny.weights".to_owned()));
     }
 }

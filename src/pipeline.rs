@@ -91,7 +91,7 @@ pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
     let t_canny = elapsed_ms(t);
 
     let t = Instant::now();
-    let fin = finish_checked(range, camera, config, &features, &regions, &canny);
+    let fin = finish(range, camera, config, &features, &regions, &canny);
     let t_relax = elapsed_ms(t);
 
     let timings =
@@ -112,18 +112,6 @@ pub fn finish(
     canny: &vcanny::Edges,
 ) -> Finish {
     check(config, "finish");
-    finish_checked(range, camera, config, features, regions, canny)
-}
-
-/// [`finish`] with `config` already checked.
-fn finish_checked(
-    range: &RangeImage,
-    camera: &Camera,
-    config: &Config,
-    features: &SurfaceFeatures,
-    regions: &regiongrow::Segmentation,
-    canny: &vcanny::Edges,
-) -> Finish {
     let valid = rangeimage::valid_mask(range);
     let s1 = c1_strength(features, config.pipeline.c1_strength);
     let (relaxed, relax_info) = if config.pipeline.relax {

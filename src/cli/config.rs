@@ -14,6 +14,6 @@ pub(crate) struct Args {
 #[allow(clippy::print_stdout)]
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = if args.paper { rangeseg::Config::paper() } else { rangeseg::Config::default() };
-    print!("{}", config.to_toml());
+    print!("{}", config.to_commented_toml());
     Ok(ExitCode::SUCCESS)
 }

@@ -83,42 +83,12 @@ impl Params {
         if self.min_region_px == 0 {
             return Err(ParamError::new("segment.min_region_px", "must be ≥ 1"));
         }
-        if !(self.gap_close_px.is_finite() && (0.0..=64.0).contains(&self.gap_close_px)) {
-            return Err(ParamError::new(
-                "segment.gap_close_px",
-                format!("must be in 0..=64, got {}", self.gap_close_px),
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.min_border_support) {
-            return Err(ParamError::new(
-                "segment.min_border_support",
-                format!("must be in 0..=1, got {}", self.min_border_support),
-            ));
-        }
-        if !(self.within_max_rms_ratio.is_finite() && self.within_max_rms_ratio >= 1.0) {
-            return Err(ParamError::new(
-                "segment.within_max_rms_ratio",
-                format!("must be finite and ≥ 1, got {}", self.within_max_rms_ratio),
-            ));
-        }
-        if !(0.0..=90.0).contains(&self.merge_max_angle_deg) {
-            return Err(ParamError::new(
-                "segment.merge_max_angle_deg",
-                format!("must be in 0..=90, got {}", self.merge_max_angle_deg),
-            ));
-        }
-        if !(self.fill_max_residual.is_finite() && self.fill_max_residual >= 0.0) {
-            return Err(ParamError::new(
-                "segment.fill_max_residual",
-                format!("must be finite and ≥ 0, got {}", self.fill_max_residual),
-            ));
-        }
-        if !(self.merge_max_residual.is_finite() && self.merge_max_residual >= 0.0) {
-            return Err(ParamError::new(
-                "segment.merge_max_residual",
-                format!("must be finite and ≥ 0, got {}", self.merge_max_residual),
-            ));
-        }
+        ParamError::in_range("segment.gap_close_px", self.gap_close_px, 0.0, 64.0)?;
+        ParamError::in_range("segment.min_border_support", self.min_border_support, 0.0, 1.0)?;
+        ParamError::at_least("segment.within_max_rms_ratio", self.within_max_rms_ratio, 1.0)?;
+        ParamError::in_range("segment.merge_max_angle_deg", self.merge_max_angle_deg, 0.0, 90.0)?;
+        ParamError::at_least("segment.fill_max_residual", self.fill_max_residual, 0.0)?;
+        ParamError::at_least("segment.merge_max_residual", self.merge_max_residual, 0.0)?;
         Ok(())
     }
 }

@@ -114,15 +114,11 @@ mod tests {
     #[test]
     fn axes_of_a_tilted_plane() {
         // z = 0.5 x − 0.25 y + 3 on a 10×10 grid: the smallest axis is the plane normal, eigenvalue 0.
+        let z = |x: f64, y: f64| 0.5 * x - 0.25 * y + 3.0;
         let mut m = Moments::default();
-        for y in 0..10 {
-            for x in 0..10 {
-                let (x, y) = (f64::from(x), f64::from(y));
-                m.add([x, y, 0.5 * x - 0.25 * y + 3.0]);
-            }
-        }
+        (0..100).map(|i| (f64::from(i % 10), f64::from(i / 10))).for_each(|(x, y)| m.add([x, y, z(x, y)]));
         assert_eq!(m.n, 100.0);
-        assert_relative_eq!(m.centroid()[2], 0.5 * 4.5 - 0.25 * 4.5 + 3.0, epsilon = 1e-12);
+        assert_relative_eq!(m.centroid()[2], z(4.5, 4.5), epsilon = 1e-12);
         let axes = m.axes();
         let k = (0..3).min_by(|&i, &j| axes.values[i].total_cmp(&axes.values[j])).unwrap();
         assert!(axes.values[k].abs() < 1e-9, "{axes:?}");

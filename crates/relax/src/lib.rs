@@ -106,15 +106,8 @@ impl Default for Params {
 impl Params {
     /// Checks the values; the error names the offending field.
     pub fn validate(&self) -> Result<(), ParamError> {
-        if !(self.t_d_px.is_finite() && (0.0..=64.0).contains(&self.t_d_px)) {
-            return Err(ParamError::new("relax.t_d_px", format!("must be in 0..=64, got {}", self.t_d_px)));
-        }
-        if !(self.lambda.is_finite() && self.lambda >= 0.0) {
-            return Err(ParamError::new(
-                "relax.lambda",
-                format!("must be finite and ≥ 0, got {}", self.lambda),
-            ));
-        }
+        ParamError::in_range("relax.t_d_px", self.t_d_px, 0.0, 64.0)?;
+        ParamError::at_least("relax.lambda", self.lambda, 0.0)?;
         if !(self.t0.is_finite() && self.t0 >= 0.0) {
             return Err(ParamError::new(
                 "relax.t0",
@@ -133,12 +126,7 @@ impl Params {
                 format!("must be in (0, 1), got {}", self.cooling_delta),
             ));
         }
-        if !(0.0..=1.0).contains(&self.min_acceptance) {
-            return Err(ParamError::new(
-                "relax.min_acceptance",
-                format!("must be in 0..=1, got {}", self.min_acceptance),
-            ));
-        }
+        ParamError::in_range("relax.min_acceptance", self.min_acceptance, 0.0, 1.0)?;
         if !(self.support_px.is_finite() && (0.0..=64.0).contains(&self.support_px)) {
             return Err(ParamError::new(
                 "relax.support_px",
