@@ -341,6 +341,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "regiongrow.merge_max_residual",
         "Default mode: adjacent regions merge only if each one's RMS distance to the other's plane is ≤ this.",
     ),
+    (
+        "regiongrow.merge_joint_rms_ratio",
+        "Default mode: adjacent regions also merge when one plane fitted to both has RMS ≤ merge_max_residual and ≤ this × their own (0 = off).",
+    ),
     ("regiongrow.min_region_px", "Regions with fewer pixels become unlabelled (0)."),
     ("regiongrow.connectivity", "Neighbourhood of growth and of the region adjacency graph: 4 or 8."),
     (
@@ -348,6 +352,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "Give left-over valid pixels to the adjacent region whose plane fits them.",
     ),
     ("regiongrow.fill_max_residual", "Largest plane distance for fill_unlabelled."),
+    (
+        "regiongrow.merge_after_fill",
+        "After the fill step, merge again (regions a band of non-growable pixels kept apart now touch).",
+    ),
     ("regiongrow.c1_one_sided", "C1 one pixel thick (one side of each border) instead of both sides."),
     ("regiongrow.seed_stride_px", "Seed candidates on every n-th pixel in x and y (1 = all pixels)."),
     (
