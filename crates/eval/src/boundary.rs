@@ -72,7 +72,9 @@ impl Prf {
 
 /// GT boundary: pixels labelled ≥ 10 with a 4-neighbour labelled ≥ 10 and different.
 pub fn gt_boundaries(gt: &LabelImage) -> EdgeMap {
-    region_boundaries(gt, |l| l >= FIRST_REGION_LABEL, false)
+    let mut out = EdgeMap::default();
+    region_boundaries(gt, |l| l >= FIRST_REGION_LABEL, false, &mut out);
+    out
 }
 
 /// Boundaries of a segmentation, given which labels are regions.
@@ -82,24 +84,41 @@ pub fn gt_boundaries(gt: &LabelImage) -> EdgeMap {
 /// regions, so a one-pixel-wide unlabelled line between two regions (as edge-based segmenters
 /// leave) counts as their boundary. Region-to-unlabelled transitions are not boundaries.
 pub fn label_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> EdgeMap {
-    region_boundaries(labels, is_region, true)
+    let mut out = EdgeMap::default();
+    region_boundaries(labels, is_region, true, &mut out);
+    out
 }
 
-fn region_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool, separators: bool) -> EdgeMap {
+/// [`label_boundaries`] into `out`, whose memory is reused.
+pub fn label_boundaries_into(labels: &LabelImage, is_region: impl Fn(u32) -> bool, out: &mut EdgeMap) {
+    region_boundaries(labels, is_region, true, out);
+}
+
+fn region_boundaries(
+    labels: &LabelImage,
+    is_region: impl Fn(u32) -> bool,
+    separators: bool,
+    out: &mut EdgeMap,
+) {
     let (w, h) = labels.dimensions();
     let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| is_region(l));
-    Grid::from_fn(w, h, |x, y| {
-        let (x, y) = (i64::from(x), i64::from(y));
-        let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
-        match at(x, y) {
-            Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
-            None if separators => {
-                let mut it = nb.iter().flatten();
-                it.next().is_some_and(|&first| it.any(|&m| m != first))
-            }
-            None => false,
+    out.reset(w, h, false);
+    let o = out.as_mut_slice();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y as usize * w as usize + x as usize;
+            let (x, y) = (i64::from(x), i64::from(y));
+            let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
+            o[i] = match at(x, y) {
+                Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
+                None if separators => {
+                    let mut it = nb.iter().flatten();
+                    it.next().is_some_and(|&first| it.any(|&m| m != first))
+                }
+                None => false,
+            };
         }
-    })
+    }
 }
 
 /// Don't-care mask for `gt`: pixels within `tolerance_px` of a GT pixel labelled 0..=9.
