@@ -8,7 +8,8 @@ fn main() {
     divan::main();
 }
 
-/// Reads `abw.train.0.range`, runs every stage and writes all outputs, on the calling thread.
+/// Reads `abw.train.0.range`, runs every stage and writes all outputs, on the calling thread, with one
+/// `Segmenter` for all iterations (as the CLI's workers run a stream of images).
 #[divan::bench(sample_count = 10)]
 fn file_to_outputs(b: divan::Bencher) {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -19,11 +20,11 @@ fn file_to_outputs(b: divan::Bencher) {
     rangeio::abw::write_range(&input, &range).expect("write input");
     let out = dir.path().join("out");
     std::fs::create_dir_all(&out).expect("out dir");
-    let config = Config::default();
-    b.bench(|| {
+    let mut seg = rangeseg::pipeline::Segmenter::new(Config::default());
+    b.bench_local(|| {
         let frame = rangeio::read(&input, &Default::default()).expect("read");
-        let result = rangeseg::segment(&frame.range, &frame.camera, &config);
-        rangeseg::write_outputs(&out, "abw.train.0", &frame, &result).expect("write")
+        let result = seg.segment(&frame.range, &frame.camera);
+        rangeseg::write_outputs(&out, "abw.train.0", &frame, result).expect("write")
     });
 }
 
@@ -67,6 +68,17 @@ fn depth_to_planes(b: divan::Bencher, name: &str) {
         let out = rangeseg::segment(divan::black_box(&range), &camera, &config);
         let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
         (out, planes)
+    });
+}
+
+/// [`depth_to_planes`] with one `Segmenter` for all frames (a stream of frames of one size).
+#[divan::bench(args = ["abw.train.0", "tum-kinect"], sample_count = 20)]
+fn stream_depth_to_planes(b: divan::Bencher, name: &str) {
+    let (range, camera) = frame(name);
+    let mut seg = rangeseg::pipeline::Segmenter::new(Config::default());
+    b.bench_local(|| {
+        let out = seg.segment(divan::black_box(&range), &camera);
+        rangeseg::planes(&range, &out.fin.labels, &camera)
     });
 }
 
