@@ -6,7 +6,7 @@
 //! (non-growable pixels and the frame hold [`BLOCKED`]), and the 3D point and local normal of a
 //! pixel sit next to each other, so the growth test of a neighbour touches two cache lines at most.
 
-use crate::merge::{Stats, merge, region_stats};
+use crate::merge::{Stats, merge, region_stats_into};
 use crate::plane::{Moments, Plane, cross, dot};
 use crate::{Info, MAX_RELAXATIONS, Mode, Params, Scratch, Segmentation, borders_into};
 use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
@@ -373,7 +373,7 @@ pub(crate) fn run(
     scratch: &mut Scratch,
     out_seg: &mut Segmentation,
 ) -> Info {
-    let Scratch { geo, labels, k, queue, cand } = scratch;
+    let Scratch { geo, labels, k, queue, cand, merge: mbufs, fill_planes } = scratch;
     let (wu, hu) = range.dimensions();
     let (w, h) = (wu as usize, hu as usize);
     let n = w * h;
@@ -396,6 +396,12 @@ pub(crate) fn run(
         Camera::Grid => geometry(&GridProj, r, features, params, (w, h), origin, (geo, labels)),
     };
     let labels = &mut labels[..];
+    // The per-label vectors get room for every label a frame of this size can have (memory that is reserved,
+    // and touched only as far as used), so frames with more regions than the first reuse them too.
+    let max_labels = (params.max_seeds as usize).min(n) + 1;
+    mbufs.reserve(max_labels);
+    fill_planes.clear();
+    fill_planes.reserve(max_labels);
     sized(k, pn);
     set_frame(k, pw, f32::NAN);
     for (y, row) in features.k.rows().enumerate() {
@@ -474,10 +480,10 @@ pub(crate) fn run(
 
     // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
     let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward);
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
-    let stats = merged.stats;
+    let stats = &mbufs.stats;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
     // Drop small regions.
@@ -501,10 +507,10 @@ pub(crate) fn run(
     let used: Vec<bool> = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
 
     if params.fill_unlabelled {
-        info.n_filled_px = fill(&ctx, params, &stats, &used, labels, queue);
+        info.n_filled_px = fill(&ctx, params, (stats, &used), labels, queue, fill_planes);
         if params.merge_after_fill && info.n_filled_px > 0 {
             // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward);
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
         }
@@ -512,7 +518,8 @@ pub(crate) fn run(
 
     // Final statistics under the current labels, then relabel 1..n in raster order of first
     // pixel while copying out of the padded grid (one pass).
-    let stats = region_stats(labels, next - 1, ctx.geo, ctx.k);
+    region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut mbufs.stats);
+    let stats = &mbufs.stats;
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];
@@ -746,20 +753,22 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
 fn fill(
     ctx: &Ctx<'_>,
     params: &Params,
-    stats: &[Stats],
-    used: &[bool],
+    (stats, used): (&[Stats], &[bool]),
     labels: &mut [u32],
     queue: &mut Vec<u32>,
+    planes: &mut Vec<Option<Plane>>,
 ) -> u32 {
     let max_res = f64::from(params.fill_max_residual);
     let offs: [isize; 4] = std::array::from_fn(|d| ctx.offs[d]);
     let geo = ctx.geo;
     // Planes of the surviving regions (fitted in both modes: this step is geometric).
-    let planes: Vec<Option<Plane>> = stats
-        .iter()
-        .zip(used)
-        .map(|(s, &u)| if u && s.count >= 3 { s.mom.fit(|p| ctx.toward(p)) } else { None })
-        .collect();
+    planes.clear();
+    planes.extend(
+        stats
+            .iter()
+            .zip(used)
+            .map(|(s, &u)| if u && s.count >= 3 { s.mom.fit(|p| ctx.toward(p)) } else { None }),
+    );
     // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
     let free = |labels: &[u32], j: usize| labels[j] == 0 && geo[j][0].is_finite();
     queue.clear();

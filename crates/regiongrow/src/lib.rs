@@ -298,6 +298,8 @@ pub struct Scratch {
     k: Vec<f32>,
     queue: Vec<u32>,
     cand: Vec<u32>,
+    merge: merge::MergeBufs,
+    fill_planes: Vec<Option<plane::Plane>>,
 }
 
 /// [`grow`] into `out` (its grids reused when they have the image's size) with the buffers of `scratch`;
