@@ -235,7 +235,10 @@ impl State {
             v.clear();
             v.resize(pw * ph, 0.0);
         }
+        // Room for every point a frame of this size can have (C1 and C2 each at most one per pixel), so a later
+        // frame with more edge points reuses the memory (reserved memory is touched only as far as used).
         pos.clear();
+        pos.reserve(2 * w * h);
         let mut st = Self {
             w,
             h,

@@ -466,7 +466,9 @@ pub fn relax_into(
     // Scaling fused into the state (the same values and A + B as `scaled` / `external_sum`).
     let bufs = std::mem::take(state);
     let mut st = State::scaled(p1, p2, [s1, magnitude], div, valid, term, params.lambda, bufs);
-    initial.clone_from(&st.pos);
+    initial.clear();
+    initial.reserve(st.pos.capacity());
+    initial.extend_from_slice(&st.pos);
     // The state's initial sums are a full computation already: Eⁱ summed over C1 in the same
     // order as `State::recompute_at`, and Eᵉ = A + B − (the same sums in the same order) = 0.
     let (ei0, ee0) = (st.e_int, 0.0);
@@ -476,7 +478,9 @@ pub fn relax_into(
     info.e_external_before = ee0;
 
     let n = st.len();
-    best.clone_from(initial);
+    best.clear();
+    best.reserve(st.pos.capacity());
+    best.extend_from_slice(initial);
     if n > 0 && params.max_sweeps > 0 {
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
         let mut coins = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x9E37_79B9_7F4A_7C15);

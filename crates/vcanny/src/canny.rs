@@ -185,7 +185,7 @@ impl Histogram {
 pub(crate) fn hysteresis(mag: &[f32], cand: &[bool], w: usize, h: usize, low: f32, high: f32) -> Vec<bool> {
     let mut state: Vec<u8> = cand.iter().map(|&c| u8::from(c)).collect();
     let mut out = Vec::new();
-    hysteresis_in_place(mag, &mut state, w, h, (low, high), &mut out);
+    hysteresis_in_place(mag, &mut state, w, h, (low, high), (&mut out, &mut Vec::new()));
     out
 }
 
@@ -196,7 +196,7 @@ pub(crate) fn hysteresis_in_place(
     w: usize,
     h: usize,
     (low, high): (f32, f32),
-    out: &mut Vec<bool>,
+    (out, stack): (&mut Vec<bool>, &mut Vec<(u32, u32)>),
 ) {
     // Bit 0 = weak (candidate ≥ low), bit 1 = also strong (≥ high); 4 = edge (visited).
     for (s, &m) in state.iter_mut().zip(mag) {
@@ -204,7 +204,10 @@ pub(crate) fn hysteresis_in_place(
         *s = weak | (weak & u8::from(m >= high)) << 1;
     }
     const STRONG: u64 = u64::from_le_bytes([2; 8]);
-    let mut stack: Vec<(usize, usize)> = Vec::new();
+    // The flood's stack: each pixel enters it at most once; room for all of them up front (reserved memory is
+    // touched only as far as used), so a later frame with larger edge chains does not reallocate it.
+    stack.clear();
+    stack.reserve(w * h);
     let mut i = 0;
     while i < w * h {
         // Skip 8 pixels at a time while none is strong.
@@ -214,14 +217,15 @@ pub(crate) fn hysteresis_in_place(
         }
         if state[i] & 2 != 0 {
             state[i] = 4;
-            stack.push((i % w, i / w));
+            stack.push(((i % w) as u32, (i / w) as u32));
             while let Some((x, y)) = stack.pop() {
+                let (x, y) = (x as usize, y as usize);
                 for yy in y.saturating_sub(1)..(y + 2).min(h) {
                     for xx in x.saturating_sub(1)..(x + 2).min(w) {
                         let k = yy * w + xx;
                         if state[k] & 3 != 0 {
                             state[k] = 4;
-                            stack.push((xx, yy));
+                            stack.push((xx as u32, yy as u32));
                         }
                     }
                 }

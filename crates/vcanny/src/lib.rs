@@ -140,6 +140,7 @@ pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, para
 pub struct Scratch {
     grad: gradient::Gradient,
     hist: Option<canny::Histogram>,
+    stack: Vec<(u32, u32)>,
 }
 
 impl std::fmt::Debug for Scratch {
@@ -230,7 +231,8 @@ fn run(
     let mut grad = gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs);
     let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist);
     let mut edges = std::mem::take(&mut out.edges).into_vec();
-    canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, (low, high), &mut edges);
+    let bufs = (&mut edges, &mut scratch.stack);
+    canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, (low, high), bufs);
     tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
     out.edges = Grid::from_vec(wu, hu, edges).expect("size matches");
     out.magnitude = Grid::from_vec(wu, hu, std::mem::take(&mut grad.magnitude)).expect("size matches");
