@@ -1,5 +1,6 @@
 //! Divan benchmarks of the whole pipeline on one 512×512 image (from a file on disk to written outputs, and in
-//! memory), of the range image → C2 path, and of the features stage on frames with no-data.
+//! memory), of the whole method in memory on the ABW-like 512² image and the 640×480 Kinect frame of `data/real`
+//! (depth → labels + planes), of the range image → C2 path, and of the features stage on frames with no-data.
 
 use rangeseg::Config;
 
@@ -7,7 +8,8 @@ fn main() {
     divan::main();
 }
 
-/// Reads `abw.train.0.range`, runs every stage and writes all outputs, on the calling thread.
+/// Reads `abw.train.0.range`, runs every stage and writes all outputs, on the calling thread, with one
+/// `Segmenter` for all iterations (as the CLI's workers run a stream of images).
 #[divan::bench(sample_count = 10)]
 fn file_to_outputs(b: divan::Bencher) {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -18,11 +20,11 @@ fn file_to_outputs(b: divan::Bencher) {
     rangeio::abw::write_range(&input, &range).expect("write input");
     let out = dir.path().join("out");
     std::fs::create_dir_all(&out).expect("out dir");
-    let config = Config::default();
-    b.bench(|| {
+    let mut seg = rangeseg::pipeline::Segmenter::new(Config::default());
+    b.bench_local(|| {
         let frame = rangeio::read(&input, &Default::default()).expect("read");
-        let result = rangeseg::segment(&frame.range, &frame.camera, &config);
-        rangeseg::write_outputs(&out, "abw.train.0", &frame, &result).expect("write")
+        let result = seg.segment(&frame.range, &frame.camera);
+        rangeseg::write_outputs(&out, "abw.train.0", &frame, result).expect("write")
     });
 }
 
@@ -34,6 +36,50 @@ fn stages_in_memory(b: divan::Bencher) {
     let range = scene.range.map(|&v| if v == 0 { f32::NAN } else { f32::from(v) });
     let config = Config::default();
     b.bench(|| rangeseg::segment(&range, &rangeimage::Camera::ABW0, &config));
+}
+
+/// A bench frame by name: `abw.train.0` (the synthetic ABW-like 512×512 image) or `tum-kinect` (the TUM RGB-D
+/// Kinect frame of `data/real`, 640×480, 19 % no data), with its camera.
+fn frame(name: &str) -> (rangeimage::RangeImage, rangeimage::Camera) {
+    match name {
+        "abw.train.0" => {
+            let (params, seed) = scenegen::benchmark_image(false, 0);
+            let range = scenegen::generate(&params, seed)
+                .range
+                .map(|&v| if v == 0 { f32::NAN } else { f32::from(v) });
+            (range, rangeimage::Camera::ABW0)
+        }
+        _ => {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("data/real/open3d-testdata/RGBD/other_formats/TUM_depth.png");
+            let f = rangeio::read(&path, &Default::default()).expect("read the TUM frame");
+            (f.range, f.camera)
+        }
+    }
+}
+
+/// The whole method in memory, from the depth array to the final labels and the regions' planes
+/// (`segment` + `planes`), one frame after another on the calling thread.
+#[divan::bench(args = ["abw.train.0", "tum-kinect"], sample_count = 20)]
+fn depth_to_planes(b: divan::Bencher, name: &str) {
+    let (range, camera) = frame(name);
+    let config = Config::default();
+    b.bench_local(|| {
+        let out = rangeseg::segment(divan::black_box(&range), &camera, &config);
+        let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
+        (out, planes)
+    });
+}
+
+/// [`depth_to_planes`] with one `Segmenter` for all frames (a stream of frames of one size).
+#[divan::bench(args = ["abw.train.0", "tum-kinect"], sample_count = 20)]
+fn stream_depth_to_planes(b: divan::Bencher, name: &str) {
+    let (range, camera) = frame(name);
+    let mut seg = rangeseg::pipeline::Segmenter::new(Config::default());
+    b.bench_local(|| {
+        let out = seg.segment(divan::black_box(&range), &camera);
+        rangeseg::planes(&range, &out.fin.labels, &camera)
+    });
 }
 
 /// The vectorial Canny from a range image to C2: the local planes (`features::fit_planes`) and

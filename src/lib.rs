@@ -9,7 +9,7 @@ pub mod pipeline;
 pub mod planes;
 
 pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams, RawCannyParams};
-pub use output::write_outputs;
+pub use output::{OutputSet, write_outputs, write_selected_outputs};
 pub use pipeline::{Output, segment};
 pub use planes::{Plane, planes};
 pub use {eval, features, finalseg, rangeimage, rangeio, regiongrow, relax, vcanny};

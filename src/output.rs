@@ -48,6 +48,24 @@ pub fn labels_png_path(seg_path: &Path) -> std::path::PathBuf {
 
 /// Regions (and their pixels) of `labels` that the `.ms-seg` written with `mapping` sets to 0.
 pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u64) {
+    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    if max <= labels.len() {
+        // Labels 1..n of a segmentation: per-label tables (no hashing per pixel).
+        let mut kept = vec![false; max + 1];
+        for &(l, _) in mapping {
+            if let Some(k) = kept.get_mut(l as usize) {
+                *k = true;
+            }
+        }
+        let mut lost = vec![false; max + 1];
+        let mut px = 0;
+        for &l in labels.as_slice() {
+            let out = l != 0 && !kept[l as usize];
+            lost[l as usize] |= out;
+            px += u64::from(out);
+        }
+        return (lost.iter().filter(|&&x| x).count(), px);
+    }
     let kept: std::collections::HashSet<u32> = mapping.iter().map(|&(l, _)| l).collect();
     let mut lost = std::collections::HashSet::new();
     let mut px = 0;
@@ -60,6 +78,50 @@ pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u6
     (lost.len(), px)
 }
 
+/// Which files [`write_selected_outputs`] writes (the CLI's `--outputs`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputSet {
+    /// `STEM.ms-seg`, `STEM.ms-nor` and `STEM.labels.png` (`ms-seg`).
+    pub ms_seg: bool,
+    /// `STEM.edges.png`, the final edge map (`edges`).
+    pub edges: bool,
+    /// `STEM.c1.png` (`c1`).
+    pub c1: bool,
+    /// `STEM.c2.png` (`c2`).
+    pub c2: bool,
+    /// `STEM.regions.png`, the labels in colour (`regions`).
+    pub regions: bool,
+    /// `STEM.planes.json` (`planes`).
+    pub planes: bool,
+}
+
+impl OutputSet {
+    /// Every output.
+    pub const ALL: Self = Self { ms_seg: true, edges: true, c1: true, c2: true, regions: true, planes: true };
+    /// The names [`OutputSet::parse`] accepts.
+    pub const NAMES: &[&str] = &["ms-seg", "edges", "c1", "c2", "regions", "planes"];
+
+    /// The set named by a comma-separated list of [`OutputSet::NAMES`] (or `all`).
+    pub fn parse(list: &str) -> Result<Self, String> {
+        let mut s = Self { ms_seg: false, edges: false, c1: false, c2: false, regions: false, planes: false };
+        for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+            match name {
+                "all" => s = Self::ALL,
+                "ms-seg" => s.ms_seg = true,
+                "edges" => s.edges = true,
+                "c1" => s.c1 = true,
+                "c2" => s.c2 = true,
+                "regions" => s.regions = true,
+                "planes" => s.planes = true,
+                other => {
+                    return Err(format!("unknown output {other:?} (one of all, {})", Self::NAMES.join(", ")));
+                }
+            }
+        }
+        Ok(s)
+    }
+}
+
 /// Writes `STEM.ms-seg`, `STEM.ms-nor`, `STEM.labels.png`, `STEM.edges.png`, `STEM.c1.png`, `STEM.c2.png`,
 /// `STEM.regions.png` and `STEM.planes.json` ([`write_planes_json`]) into `dir`, each atomically, and returns a JSON
 /// summary (counts, energies) for `STEM.json`.
@@ -69,18 +131,43 @@ pub fn write_outputs(
     frame: &Frame,
     out: &Output,
 ) -> Result<serde_json::Value, rangeio::WriteError> {
+    write_selected_outputs(dir, stem, frame, out, OutputSet::ALL)
+}
+
+/// [`write_outputs`] for the files of `which` only; without `ms-seg` the summary's `.ms-seg` counts
+/// (`regions_written`, `regions_dropped_by_ms_seg_cap`, `px_dropped_by_ms_seg_cap`) are null.
+pub fn write_selected_outputs(
+    dir: &Path,
+    stem: &str,
+    frame: &Frame,
+    out: &Output,
+    which: OutputSet,
+) -> Result<serde_json::Value, rangeio::WriteError> {
     let _s = tracing::info_span!("write_outputs", stem).entered();
     let path = |ext: &str| dir.join(format!("{stem}.{ext}"));
-    let mapping =
-        write_segmentation(&path("ms-seg"), &path("ms-nor"), &out.fin.labels, &out.fin.final_regions)?;
-    rangeio::png::write_edge_png(&path("edges.png"), out.fin.edges())?;
-    rangeio::png::write_edge_png(&path("c1.png"), &out.regions.c1)?;
-    rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;
-    rangeio::png::write_label_png(&path("regions.png"), &out.fin.labels)?;
-    let planes = crate::planes::planes(&frame.range, &out.fin.labels, &frame.camera);
-    write_planes_json(&path("planes.json"), &frame.camera, &planes)?;
+    let mapping = if which.ms_seg {
+        Some(write_segmentation(&path("ms-seg"), &path("ms-nor"), &out.fin.labels, &out.fin.final_regions)?)
+    } else {
+        None
+    };
+    if which.edges {
+        rangeio::png::write_edge_png(&path("edges.png"), out.fin.edges())?;
+    }
+    if which.c1 {
+        rangeio::png::write_edge_png(&path("c1.png"), &out.regions.c1)?;
+    }
+    if which.c2 {
+        rangeio::png::write_edge_png(&path("c2.png"), &out.canny.edges)?;
+    }
+    if which.regions {
+        rangeio::png::write_label_png(&path("regions.png"), &out.fin.labels)?;
+    }
+    if which.planes {
+        let planes = crate::planes::planes(&frame.range, &out.fin.labels, &frame.camera);
+        write_planes_json(&path("planes.json"), &frame.camera, &planes)?;
+    }
 
-    let (lost, lost_px) = ms_seg_cap_loss(&out.fin.labels, &mapping);
+    let cap = mapping.as_ref().map(|m| (m.len(), ms_seg_cap_loss(&out.fin.labels, m)));
     let count = |e: &rangeimage::EdgeMap| e.as_slice().iter().filter(|&&b| b).count();
     let info = &out.fin.relax_info;
     Ok(serde_json::json!({
@@ -89,9 +176,9 @@ pub fn write_outputs(
         "height": frame.range.height(),
         "regions_grown": out.regions.regions.len(),
         "regions_final": out.fin.final_regions.len(),
-        "regions_written": mapping.len(),
-        "regions_dropped_by_ms_seg_cap": lost,
-        "px_dropped_by_ms_seg_cap": lost_px,
+        "regions_written": cap.map(|c| c.0),
+        "regions_dropped_by_ms_seg_cap": cap.map(|c| c.1.0),
+        "px_dropped_by_ms_seg_cap": cap.map(|c| c.1.1),
         "c1_px_initial": count(&out.regions.c1),
         "c2_px_initial": count(&out.canny.edges),
         "c1_px": count(&out.fin.relaxed.c1),

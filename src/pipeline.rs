@@ -1,4 +1,5 @@
-//! The whole method on one in-memory range image: features → regions (C1) and Canny (C2) → relaxation → labels.
+//! The whole method on one in-memory range image: features → regions (C1) and Canny (C2) → relaxation → labels;
+//! [`Segmenter`] runs it on a stream of frames with the working buffers of the previous frame.
 
 use crate::config::{C1Strength, Config, FinalEdges};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
@@ -20,7 +21,7 @@ pub struct StageTimings {
 }
 
 /// Everything the pipeline computed for one image.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Output {
     /// Per-pixel geometry.
     pub features: SurfaceFeatures,
@@ -37,7 +38,7 @@ pub struct Output {
 }
 
 /// What the last stage produces: relaxed edges and the final segmentation.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Finish {
     /// C1 and C2 after relaxation, and their union with C2 restricted by the support test.
     pub relaxed: relax::Relaxed,
@@ -70,33 +71,101 @@ fn check(config: &Config, entry: &str) {
     }
 }
 
-/// Runs the whole method on one range image.
+/// Runs the whole method on one range image (a [`Segmenter`] used once).
 ///
 /// # Panics
 /// If `config` is invalid ([`Config::validate`]; [`Config::load`] returns only valid ones).
 pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
-    let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
-    check(config, "segment");
-    let t = Instant::now();
-    let features = features::compute(range, &config.features);
-    let t_features = elapsed_ms(t);
+    let mut s = Segmenter::new(config.clone());
+    s.segment(range, camera);
+    s.into_output()
+}
 
-    let t = Instant::now();
-    let (regions, regions_info) = regiongrow::grow(range, &features, camera, &config.regiongrow, config.seed);
-    let t_regions = elapsed_ms(t);
+/// The whole method on a stream of frames: owns the output of the last frame and every working buffer of the
+/// stages, and overwrites them for the next frame, so frames of one size allocate no image-sized memory after
+/// the first (they also skip the page faults of fresh memory). The results are bit-identical to [`segment`].
+#[derive(Debug, Default)]
+pub struct Segmenter {
+    config: Config,
+    out: Output,
+    scratch: Scratch,
+}
 
-    let t = Instant::now();
-    let valid = rangeimage::valid_mask(range);
-    let canny = vcanny::detect_planes(&features.plane, &valid, &config.vcanny);
-    let t_canny = elapsed_ms(t);
+/// The working buffers of every stage, and the pipeline's own per-pixel maps.
+#[derive(Debug, Default)]
+struct Scratch {
+    valid: Grid<bool>,
+    s1: Grid<f32>,
+    union: EdgeMap,
+    regiongrow: regiongrow::Scratch,
+    vcanny: vcanny::Scratch,
+    relax: relax::Scratch,
+}
 
-    let t = Instant::now();
-    let fin = finish(range, camera, config, &features, &regions, &canny);
-    let t_relax = elapsed_ms(t);
+impl Segmenter {
+    /// A segmenter running `config`; it allocates its buffers on the first frame.
+    ///
+    /// # Panics
+    /// If `config` is invalid ([`Config::validate`]; [`Config::load`] returns only valid ones).
+    pub fn new(config: Config) -> Self {
+        check(&config, "Segmenter::new");
+        Self { config, ..Self::default() }
+    }
 
-    let timings =
-        StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
-    Output { features, regions, regions_info, canny, fin, timings }
+    /// The configuration it runs.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// Segments one frame; the result lives until the next call (see [`Segmenter::into_output`]).
+    pub fn segment(&mut self, range: &RangeImage, camera: &Camera) -> &Output {
+        let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
+        let Self { config, out, scratch } = self;
+        let t = Instant::now();
+        features::compute_into(range, &config.features, &mut out.features);
+        let t_features = elapsed_ms(t);
+
+        let t = Instant::now();
+        out.regions_info = regiongrow::grow_into(
+            range,
+            &out.features,
+            camera,
+            &config.regiongrow,
+            config.seed,
+            &mut scratch.regiongrow,
+            &mut out.regions,
+        );
+        let t_regions = elapsed_ms(t);
+
+        let t = Instant::now();
+        scratch.valid.map_from(range, |v| v.is_finite());
+        vcanny::detect_planes_into(
+            &out.features.plane,
+            &scratch.valid,
+            &config.vcanny,
+            &mut scratch.vcanny,
+            &mut out.canny,
+        );
+        let t_canny = elapsed_ms(t);
+
+        let t = Instant::now();
+        finish_into(range, camera, config, (&out.features, &out.regions, &out.canny), scratch, &mut out.fin);
+        let t_relax = elapsed_ms(t);
+
+        out.timings =
+            StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
+        &self.out
+    }
+
+    /// The output of the last frame (empty before the first frame).
+    pub fn output(&self) -> &Output {
+        &self.out
+    }
+
+    /// The output of the last frame, without copying it (empty before the first frame).
+    pub fn into_output(self) -> Output {
+        self.out
+    }
 }
 
 /// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
@@ -112,40 +181,66 @@ pub fn finish(
     canny: &vcanny::Edges,
 ) -> Finish {
     check(config, "finish");
-    let valid = rangeimage::valid_mask(range);
-    let s1 = c1_strength(features, config.pipeline.c1_strength);
-    let (relaxed, relax_info) = if config.pipeline.relax {
+    let mut fin = Finish::default();
+    let mut scratch = Scratch { valid: rangeimage::valid_mask(range), ..Scratch::default() };
+    finish_into(range, camera, config, (features, regions, canny), &mut scratch, &mut fin);
+    fin
+}
+
+/// [`finish`] into `fin` with the buffers of `scratch`, whose `valid` holds the valid mask of `range`.
+fn finish_into(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &Config,
+    (features, regions, canny): (&SurfaceFeatures, &regiongrow::Segmentation, &vcanny::Edges),
+    scratch: &mut Scratch,
+    fin: &mut Finish,
+) {
+    let valid = &scratch.valid;
+    if config.pipeline.relax {
+        c1_strength_into(features, config.pipeline.c1_strength, &mut scratch.s1);
         let input = relax::Input {
             c1: &regions.c1,
-            s1: &s1,
+            s1: &scratch.s1,
             c2: &canny.edges,
             magnitude: &canny.magnitude,
-            valid: &valid,
+            valid,
         };
-        relax::relax(&input, &config.relax, config.seed)
+        fin.relax_info =
+            relax::relax_into(&input, &config.relax, config.seed, &mut scratch.relax, &mut fin.relaxed);
     } else {
-        let edges = relax::union(&regions.c1, &canny.edges);
-        let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
-        (relaxed, relax::Info::default())
-    };
+        relax::union_into(&regions.c1, &canny.edges, &mut fin.relaxed.edges);
+        fin.relaxed.c1.copy_from(&regions.c1);
+        fin.relaxed.c2.copy_from(&canny.edges);
+        fin.relax_info = relax::Info::default();
+    }
     // The segmentation sees both relaxed sets in full (before the support test): a border between
     // two faces that region growing merged has only C2 to show it.
-    let (labels, final_regions) =
-        finalseg::segment(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
-    let edges = match config.pipeline.final_edges {
-        FinalEdges::Relaxed => relaxed.edges.clone(),
+    relax::union_into(&fin.relaxed.c1, &fin.relaxed.c2, &mut scratch.union);
+    (fin.labels, fin.final_regions) =
+        finalseg::segment(range, camera, &scratch.union, Some(&regions.labels), &config.segment);
+    match config.pipeline.final_edges {
+        FinalEdges::Relaxed => fin.edges.copy_from(&fin.relaxed.edges),
         // The boundary rule eval scores segmentations by: region pixels next to another region, and
         // unlabelled pixels between two regions; a region's edge against unlabelled pixels is no border.
-        FinalEdges::Segmentation => rangeimage::boundary::label_boundaries(&labels, |l| l != 0),
-    };
-    Finish { relaxed, relax_info, labels, final_regions, edges }
+        FinalEdges::Segmentation => {
+            rangeimage::boundary::label_boundaries_into(&fin.labels, |l| l != 0, &mut fin.edges)
+        }
+    }
 }
 
 /// The C1 strength map s1 for the relaxation energy; 0 where undefined.
 pub fn c1_strength(features: &SurfaceFeatures, which: C1Strength) -> Grid<f32> {
-    let src = match which {
-        C1Strength::AbsK => features.k.map(|k| k.abs()),
-        C1Strength::Curvedness => features.curvedness.clone(),
-    };
-    src.map(|v| if v.is_finite() { *v } else { 0.0 })
+    let mut s1 = Grid::default();
+    c1_strength_into(features, which, &mut s1);
+    s1
+}
+
+/// [`c1_strength`] into `s1`, whose memory is reused.
+fn c1_strength_into(features: &SurfaceFeatures, which: C1Strength, s1: &mut Grid<f32>) {
+    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+    match which {
+        C1Strength::AbsK => s1.map_from(&features.k, |k| finite(k.abs())),
+        C1Strength::Curvedness => s1.map_from(&features.curvedness, |&c| finite(c)),
+    }
 }

@@ -47,9 +47,7 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
     assert_eq!(range.dimensions(), labels.dimensions(), "range and labels differ in size");
     let (w, _) = labels.dimensions();
     let w = w as usize;
-    let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
-    ids.sort_unstable();
-    ids.dedup();
+    let ids = label_ids(labels);
     let empty = Acc {
         pixels: 0,
         points: 0,
@@ -59,7 +57,22 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
         bbox: [u32::MAX, u32::MAX, 0, 0],
     };
     let mut acc = vec![empty; ids.len()];
-    let index = |l: u32| ids.binary_search(&l).expect("every label was collected");
+    // Label → index into `ids`: a table when the labels are at most as many as the pixels (a segmentation's
+    // 1..n), else a binary search.
+    let max = ids.last().copied().unwrap_or(0) as usize;
+    let table: Vec<u32> = if max <= labels.len() {
+        let mut t = vec![u32::MAX; max + 1];
+        for (j, &l) in ids.iter().enumerate() {
+            t[l as usize] = j as u32;
+        }
+        t
+    } else {
+        Vec::new()
+    };
+    let index = |l: u32| match table.get(l as usize) {
+        Some(&j) if !table.is_empty() => j as usize,
+        _ => ids.binary_search(&l).expect("every label was collected"),
+    };
     let point = |i: usize, v: f32| camera.point((i % w) as f64, (i / w) as f64, f64::from(v));
     let pixels = || range.as_slice().iter().zip(labels.as_slice()).enumerate().filter(|(_, (_, l))| **l != 0);
 
@@ -119,6 +132,23 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
             bbox: a.bbox,
         })
         .collect()
+}
+
+/// The distinct non-zero labels of `labels`, sorted: marked in a table up to the largest label when that is
+/// at most the pixel count (a segmentation's 1..n: one pass, no sort of the pixels), else sorted.
+fn label_ids(labels: &LabelImage) -> Vec<u32> {
+    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    if max > labels.len() {
+        let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        return ids;
+    }
+    let mut seen = vec![false; max + 1];
+    for &l in labels.as_slice() {
+        seen[l as usize] = true;
+    }
+    (1..=max).filter(|&l| seen[l]).map(|l| l as u32).collect()
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

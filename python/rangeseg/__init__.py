@@ -30,6 +30,7 @@ from ._rangeseg import (
     read,
     read_bytes,
 )
+from ._rangeseg import Segmenter as _Segmenter
 from ._rangeseg import segment as _segment
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "RangesegError",
     "ReadError",
     "Result",
+    "Segmenter",
     "load_config",
     "parse_camera",
     "read",
@@ -121,8 +123,30 @@ def segment(
     strides) into the pipeline's own grid; it is not modified. ``seed`` overrides the configuration's.
     Results equal the CLI's (``rangeseg segment``) bit for bit on the same values, camera and configuration.
     """
-    cfg = load_config(config)
-    raw = _segment(depth, camera, cfg, seed, depth_scale)
+    return _result(_segment(depth, camera, load_config(config), seed, depth_scale))
+
+
+class Segmenter:
+    """Segments a stream of depth images, keeping the working buffers of the previous one.
+
+    Frames of one size allocate no image-sized memory after the first (and skip the page faults of fresh
+    memory); each call gives what :func:`segment` gives, bit for bit. One per thread: a call holds it.
+
+    >>> seg = rangeseg.Segmenter(config)
+    >>> for depth in frames:
+    ...     result = seg.segment(depth, camera)
+    """
+
+    def __init__(self, config: ConfigLike = None, seed: Optional[int] = None) -> None:
+        self._inner = _Segmenter(load_config(config), seed)
+
+    def segment(self, depth: np.ndarray, camera: Camera, *, depth_scale: Optional[float] = None) -> Result:
+        """As :func:`segment` with this segmenter's configuration and seed."""
+        return _result(self._inner.segment(depth, camera, depth_scale))
+
+
+def _result(raw: Dict[str, Any]) -> Result:
+    """A :class:`Result` from the native module's dict."""
     cols = raw["planes"]
     planes = np.zeros(len(cols["label"]), dtype=PLANE_DTYPE)
     for name in PLANE_DTYPE.names:

@@ -64,6 +64,14 @@ def read_bytes(
 ) -> Tuple[np.ndarray, Camera]:
     """Like read, on a file's bytes; name chooses the ABW calibration and names the file in errors."""
 
+class Segmenter:
+    """The pipeline on a stream of frames, reusing the previous frame's buffers."""
+
+    def __init__(self, config: Optional[Config] = None, seed: Optional[int] = None) -> None: ...
+    def segment(
+        self, depth: np.ndarray, camera: Camera, depth_scale: Optional[float] = None
+    ) -> Dict[str, Any]: ...
+
 def segment(
     depth: np.ndarray,
     camera: Camera,

@@ -116,6 +116,19 @@ def test_uint16_input_equals_float_metres() -> None:
     assert np.array_equal(c.labels, b.labels) and c.planes.tobytes() == b.planes.tobytes()
 
 
+def test_segmenter_on_a_stream_equals_segment() -> None:
+    camera = rangeseg.ABW(0)
+    first = scene().astype(np.float32)
+    second = first.copy()
+    second[40:60, :] = np.nan
+    seg = rangeseg.Segmenter(seed=3)
+    for depth in [first, second, first]:
+        a = seg.segment(depth, camera)
+        b = rangeseg.segment(depth, camera, seed=3)
+        assert np.array_equal(a.labels, b.labels) and a.planes.tobytes() == b.planes.tobytes()
+        assert np.array_equal(a.edges, b.edges) and np.array_equal(a.c1, b.c1) and np.array_equal(a.c2, b.c2)
+
+
 def test_config_from_dict_path_and_seed(tmp_path: Path, cli: Path) -> None:
     depth, camera = rangeseg.read_bytes(_scene_bytes(), "scene.range")
     toml_path = tmp_path / "c.toml"

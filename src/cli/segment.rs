@@ -35,6 +35,10 @@ pub(crate) struct Args {
     /// Memory the images in flight may use together, in MiB [default: 3/4 of MemAvailable, else 4096].
     #[arg(long, value_name = "MIB")]
     memory_mib: Option<u64>,
+    /// The files to write besides `NAME.json`, comma-separated: ms-seg (also `.ms-nor` and `.labels.png`),
+    /// edges, c1, c2, regions, planes, or all.
+    #[arg(long, value_name = "LIST", default_value = "all", value_parser = rangeseg::OutputSet::parse)]
+    outputs: rangeseg::OutputSet,
 }
 
 /// File extensions `segment` picks up inside a directory.
@@ -83,10 +87,12 @@ pub(crate) fn run(args: Args) -> Result<ExitCode> {
     std::thread::scope(|s| {
         for _ in 0..jobs.min(inputs.len()) {
             s.spawn(|| {
+                // One segmenter per worker: its images reuse the buffers of its previous image.
+                let mut seg = rangeseg::pipeline::Segmenter::new(config.clone());
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(input) = inputs.get(i) else { break };
-                    let r = segment_one(input, &args.out, &config, &opts, &budget);
+                    let r = segment_one(input, (&args.out, args.outputs), &mut seg, &opts, &budget);
                     results.lock().unwrap_or_else(std::sync::PoisonError::into_inner)[i] = Some(r);
                     bar.inc(1);
                 }
@@ -221,8 +227,8 @@ impl Drop for Reservation<'_> {
 
 fn segment_one(
     input: &Path,
-    out: &Path,
-    config: &Config,
+    (out, which): (&Path, rangeseg::OutputSet),
+    seg: &mut rangeseg::pipeline::Segmenter,
     opts: &rangeio::ReadOptions,
     budget: &Budget,
 ) -> Result<()> {
@@ -241,7 +247,7 @@ fn segment_one(
         );
     }
     let _reserved = budget.acquire(need);
-    let result = rangeseg::segment(&frame.range, &frame.camera, config);
+    let result = seg.segment(&frame.range, &frame.camera);
 
     let t = Instant::now();
     let stem = stem_of(input);
@@ -254,7 +260,7 @@ fn segment_one(
         }
         _ => {}
     }
-    let summary = rangeseg::write_outputs(out, &stem, &frame, &result)?;
+    let summary = rangeseg::write_selected_outputs(out, &stem, &frame, result, which)?;
     let t_write = t.elapsed().as_secs_f64() * 1e3;
     let total = t_total.elapsed().as_secs_f64() * 1e3;
 

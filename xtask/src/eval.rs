@@ -64,11 +64,15 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let rows: Vec<ImageRow> = set
         .images
         .par_iter()
-        .map(|img| {
-            let r = evaluate_one(img, &config, &out_dir, &fig_dir);
-            bar.inc(1);
-            r
-        })
+        // One segmenter per rayon job: its images reuse the buffers of its previous image.
+        .map_init(
+            || rangeseg::pipeline::Segmenter::new(config.clone()),
+            |seg, img| {
+                let r = evaluate_one(img, seg, &out_dir, &fig_dir);
+                bar.inc(1);
+                r
+            },
+        )
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
 
@@ -90,23 +94,29 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
 }
 
 /// Runs the pipeline on one test image, writes its outputs and figure, and scores it.
-fn evaluate_one(img: &LabelledImage, config: &Config, out_dir: &Path, fig_dir: &Path) -> Result<ImageRow> {
+fn evaluate_one(
+    img: &LabelledImage,
+    seg: &mut rangeseg::pipeline::Segmenter,
+    out_dir: &Path,
+    fig_dir: &Path,
+) -> Result<ImageRow> {
     let t = Instant::now();
     let LoadedImage { frame, gt, angles, .. } = img.load()?;
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
 
     let t_total = Instant::now();
-    let out = rangeseg::segment(&frame.range, &frame.camera, config);
+    let out = seg.segment(&frame.range, &frame.camera);
     let t = Instant::now();
-    rangeseg::write_outputs(out_dir, &img.stem, &frame, &out)?;
+    rangeseg::write_outputs(out_dir, &img.stem, &frame, out)?;
     let write_ms = t.elapsed().as_secs_f64() * 1e3;
     let total_ms = t_total.elapsed().as_secs_f64() * 1e3 + read_ms;
 
     // The raw-depth baseline of Table I is not part of the pipeline, so it is outside the timings.
-    let raw = vcanny::detect_raw(&frame.range, &config.raw_canny.detector());
+    let raw = vcanny::detect_raw(&frame.range, &seg.config().raw_canny.detector());
 
-    let scores = rangeseg::evaluate::score_image(&out, &raw.edges, &gt, &angles);
-    let figure = report::figure(&frame.range, &gt, &out);
+    let out = seg.output();
+    let scores = rangeseg::evaluate::score_image(out, &raw.edges, &gt, &angles);
+    let figure = report::figure(&frame.range, &gt, out);
     let fig_path = fig_dir.join(format!("{}.png", img.stem));
     rangeio::png::write_rgb_png(&fig_path, &figure)?;
     Ok(ImageRow {

@@ -1,12 +1,14 @@
 //! Region boundaries of a label image, the one rule the final edge map and the evaluation share.
 
-use crate::{EdgeMap, Grid, LabelImage};
+use crate::{EdgeMap, LabelImage};
 
 /// Borders between regions: region pixels (`is_region(label)`) with a 4-neighbour in a different
 /// region. Both sides of a border are marked; region-to-non-region transitions are not borders.
 #[must_use]
 pub fn region_borders(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> EdgeMap {
-    boundaries(labels, is_region, false)
+    let mut out = EdgeMap::default();
+    boundaries_into(labels, is_region, false, &mut out);
+    out
 }
 
 /// Boundaries of a segmentation: [`region_borders`], plus the non-region pixels whose 4-neighbours
@@ -15,29 +17,47 @@ pub fn region_borders(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> E
 /// boundaries.
 #[must_use]
 pub fn label_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> EdgeMap {
-    boundaries(labels, is_region, true)
+    let mut out = EdgeMap::default();
+    boundaries_into(labels, is_region, true, &mut out);
+    out
 }
 
-fn boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool, separators: bool) -> EdgeMap {
+/// [`label_boundaries`] into `out`, whose memory is reused.
+pub fn label_boundaries_into(labels: &LabelImage, is_region: impl Fn(u32) -> bool, out: &mut EdgeMap) {
+    boundaries_into(labels, is_region, true, out);
+}
+
+fn boundaries_into(
+    labels: &LabelImage,
+    is_region: impl Fn(u32) -> bool,
+    separators: bool,
+    out: &mut EdgeMap,
+) {
     let (w, h) = labels.dimensions();
     let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| is_region(l));
-    Grid::from_fn(w, h, |x, y| {
-        let (x, y) = (i64::from(x), i64::from(y));
-        let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
-        match at(x, y) {
-            Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
-            None if separators => {
-                let mut it = nb.iter().flatten();
-                it.next().is_some_and(|&first| it.any(|&m| m != first))
-            }
-            None => false,
+    out.reset(w, h, false);
+    let o = out.as_mut_slice();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y as usize * w as usize + x as usize;
+            let (x, y) = (i64::from(x), i64::from(y));
+            let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
+            o[i] = match at(x, y) {
+                Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
+                None if separators => {
+                    let mut it = nb.iter().flatten();
+                    it.next().is_some_and(|&first| it.any(|&m| m != first))
+                }
+                None => false,
+            };
         }
-    })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Grid;
 
     #[test]
     fn borders_are_two_sided_and_separators_join_only_label_boundaries() {

@@ -121,12 +121,23 @@ pub fn reach(t: f64) -> Vec<usize> {
 /// sweeps; then a pixel is near if a row `dy` away has that distance ≤ `reach[dy]`.
 #[must_use]
 pub fn within(mask: &Grid<bool>, t: f64) -> Grid<bool> {
+    let mut out = Grid::default();
+    within_into(mask, t, &mut Vec::new(), &mut out);
+    out
+}
+
+/// [`within`] into `out`, with `hd` as the per-row distances; the memory of both is reused.
+///
+/// # Panics
+/// As [`within`].
+pub fn within_into(mask: &Grid<bool>, t: f64, hd: &mut Vec<u16>, out_grid: &mut Grid<bool>) {
     assert!(t.is_finite() && (0.0..65535.0).contains(&t), "distance::within: distance {t} out of range");
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let rx = reach(t);
     let r = rx.len() - 1;
     let cap = (r + 1) as u16;
-    let mut hd = vec![cap; w * h];
+    hd.clear();
+    hd.resize(w * h, cap);
     for (row, mrow) in hd.chunks_exact_mut(w.max(1)).zip(mask.as_slice().chunks_exact(w.max(1))) {
         let mut d = cap;
         for (o, &m) in row.iter_mut().zip(mrow) {
@@ -139,7 +150,8 @@ pub fn within(mask: &Grid<bool>, t: f64) -> Grid<bool> {
             *o = (*o).min(d);
         }
     }
-    let mut out = vec![false; w * h];
+    out_grid.reset(mask.width(), mask.height(), false);
+    let out = out_grid.as_mut_slice();
     for (y, orow) in out.chunks_exact_mut(w.max(1)).enumerate() {
         for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
             let lim = rx[yy.abs_diff(y)] as u16;
@@ -148,7 +160,6 @@ pub fn within(mask: &Grid<bool>, t: f64) -> Grid<bool> {
             }
         }
     }
-    Grid::from_vec(mask.width(), mask.height(), out).expect("size matches")
 }
 
 #[cfg(test)]

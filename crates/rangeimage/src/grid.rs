@@ -140,6 +140,28 @@ impl<T: Clone> Grid<T> {
     pub fn new(width: u32, height: u32, value: T) -> Self {
         Self { width, height, data: vec![value; width as usize * height as usize] }
     }
+
+    /// Makes this grid `width × height` and fills it with `value`, reusing its memory (no allocation when
+    /// it already held as many pixels).
+    pub fn reset(&mut self, width: u32, height: u32, value: T) {
+        self.data.clear();
+        self.data.resize(width as usize * height as usize, value);
+        (self.width, self.height) = (width, height);
+    }
+
+    /// Makes this grid a copy of `other`, reusing its memory (no allocation when it already held as many
+    /// pixels).
+    pub fn copy_from(&mut self, other: &Grid<T>) {
+        self.data.clone_from(&other.data);
+        (self.width, self.height) = (other.width, other.height);
+    }
+
+    /// Makes this grid `other` with `f` applied to each pixel, reusing its memory.
+    pub fn map_from<U>(&mut self, other: &Grid<U>, f: impl FnMut(&U) -> T) {
+        self.data.clear();
+        self.data.extend(other.data.iter().map(f));
+        (self.width, self.height) = (other.width, other.height);
+    }
 }
 
 impl<T> Index<(u32, u32)> for Grid<T> {

@@ -204,8 +204,7 @@ fn check_labels(raw: &Grid<u8>, path: &Path) -> Result<(), ReadError> {
 /// the pairs are sorted by new label (a debug event says how many regions were dropped; callers report it).
 pub fn write_labels(path: &Path, labels: &LabelImage) -> Result<Vec<(u32, u8)>, WriteError> {
     let (raw, pairs) = labels_to_raw(labels);
-    let present =
-        labels.as_slice().iter().filter(|&&l| l != 0).collect::<std::collections::BTreeSet<_>>().len();
+    let present = distinct_nonzero(labels);
     if pairs.len() < present {
         tracing::debug!(
             path = %path.display(),
@@ -216,6 +215,52 @@ pub fn write_labels(path: &Path, labels: &LabelImage) -> Result<Vec<(u32, u8)>, 
     }
     write_raster(path, &raw)?;
     Ok(pairs)
+}
+
+/// The largest label of `labels` if it is at most the pixel count (a segmentation's labels 1..n, so per-label
+/// tables indexed by the label are no larger than the image), else `None`.
+fn dense_max(labels: &LabelImage) -> Option<usize> {
+    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    (max <= labels.len()).then_some(max)
+}
+
+/// The number of distinct non-zero labels.
+fn distinct_nonzero(labels: &LabelImage) -> usize {
+    match dense_max(labels) {
+        Some(max) => {
+            let mut seen = vec![false; max + 1];
+            for &l in labels.as_slice() {
+                seen[l as usize] = true;
+            }
+            seen[1..].iter().filter(|&&s| s).count()
+        }
+        None => {
+            labels.as_slice().iter().filter(|&&l| l != 0).collect::<std::collections::BTreeSet<_>>().len()
+        }
+    }
+}
+
+/// `(label, pixel count, first pixel index)` of every non-zero label, by increasing label.
+fn label_stats(labels: &LabelImage) -> Vec<(u32, u64, usize)> {
+    if let Some(max) = dense_max(labels) {
+        let mut t = vec![(0u64, 0usize); max + 1];
+        for (i, &l) in labels.as_slice().iter().enumerate() {
+            let e = &mut t[l as usize];
+            if e.0 == 0 {
+                e.1 = i;
+            }
+            e.0 += 1;
+        }
+        return (1..=max).filter(|&l| t[l].0 > 0).map(|l| (l as u32, t[l].0, t[l].1)).collect();
+    }
+    // label -> (size, first appearance)
+    let mut stats: BTreeMap<u32, (u64, usize)> = BTreeMap::new();
+    for (i, &l) in labels.as_slice().iter().enumerate() {
+        if l != 0 {
+            stats.entry(l).or_insert((0, i)).0 += 1;
+        }
+    }
+    stats.iter().map(|(&l, &(n, first))| (l, n, first)).collect()
 }
 
 /// The 8-bit encoding of [`write_labels`] without the file: values and `(old, new)` pairs.
@@ -229,21 +274,25 @@ pub fn labels_to_raw(labels: &LabelImage) -> (Grid<u8>, Vec<(u32, u8)>) {
         let pairs = (10..256u32).filter(|&l| seen[l as usize]).map(|l| (l, l as u8)).collect();
         return (labels.map(|&l| l as u8), pairs);
     }
-    // label -> (size, first appearance)
-    let mut stats: BTreeMap<u32, (u64, usize)> = BTreeMap::new();
-    for (i, &l) in labels.as_slice().iter().enumerate() {
-        if l != 0 {
-            stats.entry(l).or_insert((0, i)).0 += 1;
-        }
-    }
-    let mut by_size: Vec<(u32, u64, usize)> = stats.iter().map(|(&l, &(n, first))| (l, n, first)).collect();
+    let mut by_size = label_stats(labels);
     by_size.sort_by(|a, b| b.1.cmp(&a.1).then(a.2.cmp(&b.2)));
     by_size.truncate(246);
     by_size.sort_by_key(|&(_, _, first)| first);
-    let map: BTreeMap<u32, u8> =
+    let pairs: Vec<(u32, u8)> =
         by_size.iter().enumerate().map(|(i, &(l, _, _))| (l, (10 + i) as u8)).collect();
-    let raw = labels.map(|l| map.get(l).copied().unwrap_or(0));
-    let pairs = by_size.iter().map(|&(l, _, _)| (l, map[&l])).collect();
+    let raw = match dense_max(labels) {
+        Some(max) => {
+            let mut table = vec![0u8; max + 1];
+            for &(l, new) in &pairs {
+                table[l as usize] = new;
+            }
+            labels.map(|&l| table[l as usize])
+        }
+        None => {
+            let map: BTreeMap<u32, u8> = pairs.iter().copied().collect();
+            labels.map(|l| map.get(l).copied().unwrap_or(0))
+        }
+    };
     (raw, pairs)
 }
 

@@ -3,7 +3,7 @@
 //! Every writer encodes in memory and goes through [`crate::write_atomic`].
 
 use crate::{ReadError, WriteError, raster, read_file, write_atomic};
-use image::codecs::png::PngEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder, ImageFormat};
 use rangeimage::{EdgeMap, Grid, LabelImage, RangeImage};
 use std::path::Path;
@@ -19,7 +19,9 @@ fn encode(
         return Err(WriteError::Invalid { path: path.to_path_buf(), what: "an empty image as png".into() });
     }
     let mut buf = Vec::new();
-    PngEncoder::new(&mut buf)
+    // Fast deflate with the `Up` filter on every row: measured on the pipeline's outputs (edge maps, label
+    // images) 2–3× faster to encode than the adaptive filter, the files 5–25 % larger.
+    PngEncoder::new_with_quality(&mut buf, CompressionType::Fast, FilterType::Up)
         .write_image(data, width, height, color)
         .map_err(|error| WriteError::Image { path: path.to_path_buf(), error })?;
     write_atomic(path, &buf)

@@ -349,16 +349,65 @@ fn segment<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let camera = camera_from(camera)?;
     let range = range_from(depth, depth_scale)?;
+    let mut seg = rangeseg::pipeline::Segmenter::new(config_with_seed(config, seed));
+    let planes = py.detach(|| {
+        let out = seg.segment(&range, &camera);
+        rangeseg::planes(&range, &out.fin.labels, &camera)
+    });
+    result_dict(py, &seg.into_output(), &planes)
+}
+
+/// The configuration of `config` (the defaults if `None`) with `seed` overriding its seed.
+fn config_with_seed(config: Option<&Bound<'_, PyConfig>>, seed: Option<u64>) -> Config {
     let mut config = config.map_or_else(Config::default, |c| c.get().inner.clone());
     if let Some(seed) = seed {
         config.seed = seed;
     }
-    let (out, planes) = py.detach(|| {
-        let out = rangeseg::segment(&range, &camera, &config);
-        let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
-        (out, planes)
-    });
+    config
+}
 
+/// The pipeline on a stream of depth arrays: keeps the working buffers of the previous frame, so frames of one
+/// size allocate no image-sized memory after the first; each call returns what [`segment`] returns, bit for bit.
+#[pyclass(module = "rangeseg", name = "Segmenter")]
+struct PySegmenter {
+    inner: rangeseg::pipeline::Segmenter,
+}
+
+#[pymethods]
+impl PySegmenter {
+    #[new]
+    #[pyo3(signature = (config = None, seed = None))]
+    fn new(config: Option<&Bound<'_, PyConfig>>, seed: Option<u64>) -> Self {
+        Self { inner: rangeseg::pipeline::Segmenter::new(config_with_seed(config, seed)) }
+    }
+
+    /// Segments one frame (GIL released); the same dict as the module's `segment`.
+    #[pyo3(signature = (depth, camera, depth_scale = None))]
+    fn segment<'py>(
+        &mut self,
+        py: Python<'py>,
+        depth: &Bound<'py, PyAny>,
+        camera: &Bound<'py, PyAny>,
+        depth_scale: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let camera = camera_from(camera)?;
+        let range = range_from(depth, depth_scale)?;
+        let seg = &mut self.inner;
+        let planes = py.detach(|| {
+            let out = seg.segment(&range, &camera);
+            rangeseg::planes(&range, &out.fin.labels, &camera)
+        });
+        let out = self.inner.output();
+        result_dict(py, out, &planes)
+    }
+}
+
+/// The dict `segment` returns for one pipeline output and its planes.
+fn result_dict<'py>(
+    py: Python<'py>,
+    out: &rangeseg::Output,
+    planes: &[rangeseg::Plane],
+) -> PyResult<Bound<'py, PyDict>> {
     let labels = out.fin.labels.map(|&l| i32::try_from(l).unwrap_or(-1));
     let d = PyDict::new(py);
     d.set_item("labels", grid_to_py(py, labels)?)?;
@@ -408,6 +457,7 @@ fn _rangeseg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(read_bytes, m)?)?;
     m.add_function(wrap_pyfunction!(segment, m)?)?;
+    m.add_class::<PySegmenter>()?;
     m.add("RangesegError", py.get_type::<RangesegError>())?;
     m.add("ReadError", py.get_type::<ReadError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;

@@ -6,9 +6,9 @@
 //! (non-growable pixels and the frame hold [`BLOCKED`]), and the 3D point and local normal of a
 //! pixel sit next to each other, so the growth test of a neighbour touches two cache lines at most.
 
-use crate::merge::{Stats, merge, region_stats};
+use crate::merge::{Stats, merge, region_stats_into};
 use crate::plane::{Moments, Plane, cross, dot};
-use crate::{Info, MAX_RELAXATIONS, Mode, Params, Segmentation, borders};
+use crate::{Info, MAX_RELAXATIONS, Mode, Params, Scratch, Segmentation, borders_into};
 use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
 use rangeimage::{AbwCalibration, Camera, Grid, RangeImage, Region, SurfaceFeatures};
 
@@ -39,9 +39,9 @@ struct Ctx<'a> {
     eight: bool,
     /// Per padded pixel: 3D point relative to `origin` (NaN where the range is not finite) and,
     /// in default mode, the unit local normal toward the sensor (NaN where not computed).
-    geo: Vec<[f32; 6]>,
+    geo: &'a [[f32; 6]],
     /// K per padded pixel (NaN on the frame).
-    k: Vec<f32>,
+    k: &'a [f32],
     origin: [f64; 3],
     camera: &'a Camera,
 }
@@ -71,6 +71,21 @@ fn set_frame<T: Copy>(a: &mut [T], pw: usize, v: T) {
         a[i + 1] = v;
         i += pw;
     }
+}
+
+/// Makes `v` hold `n` elements whose values the caller overwrites: kept as it is when it already holds `n`
+/// (a buffer of the previous frame), else zeroed memory (`vec!`, which the allocator serves without a fill).
+fn sized<T: Copy + Default>(v: &mut Vec<T>, n: usize) {
+    if v.len() != n {
+        *v = Vec::new();
+        *v = vec![T::default(); n];
+    }
+}
+
+/// Makes `v` hold `n` copies of `value`, reusing its memory.
+fn filled<T: Copy>(v: &mut Vec<T>, n: usize, value: T) {
+    v.clear();
+    v.resize(n, value);
 }
 
 /// A camera model with its variant resolved, so per-pixel loops carry no `match`.
@@ -171,14 +186,14 @@ fn geometry<P: Proj>(
     range: &[f32],
     features: &SurfaceFeatures,
     params: &Params,
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
     origin: [f64; 3],
-) -> (Vec<[f32; 6]>, Vec<u32>, usize) {
+    (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
+) -> usize {
     let pw = w + 2;
     let pn = pw * (h + 2);
-    let mut geo = vec![[f32::NAN; 6]; pn];
-    let mut labels = vec![BLOCKED; pn];
+    filled(geo, pn, [f32::NAN; 6]);
+    filled(labels, pn, BLOCKED);
     let mut growable = 0usize;
     let paper = params.mode == Mode::Paper;
     let k = features.k.as_slice();
@@ -226,7 +241,7 @@ fn geometry<P: Proj>(
             }
         }
     }
-    (geo, labels, growable)
+    growable
 }
 
 /// Constants of the closed-form ABW local normal (see [`geometry_abw`]).
@@ -275,15 +290,15 @@ fn geometry_abw(
     range: &[f32],
     features: &SurfaceFeatures,
     params: &Params,
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
     origin: [f64; 3],
-) -> (Vec<[f32; 6]>, Vec<u32>, usize) {
+    (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
+) -> usize {
     let pw = w + 2;
-    // Zeroed allocation (no fill pass); every interior record is written below, the frame here.
-    let mut geo = vec![[0.0f32; 6]; pw * (h + 2)];
-    set_frame(&mut geo, pw, [f32::NAN; 6]);
-    let mut labels = vec![BLOCKED; pw * (h + 2)];
+    // Zeroed or the previous frame's (no fill pass); every interior record is written below, the frame here.
+    sized(geo, pw * (h + 2));
+    set_frame(geo, pw, [f32::NAN; 6]);
+    filled(labels, pw * (h + 2), BLOCKED);
     let paper = params.mode == Mode::Paper;
     let max_c = params.max_curvedness;
     let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
@@ -345,16 +360,20 @@ fn geometry_abw(
             growable += usize::from(grow);
         }
     }
-    (geo, labels, growable)
+    growable
 }
 
+/// The stage on the buffers of `scratch`, writing `out` (whose grids are reused when of the right size).
 pub(crate) fn run(
     range: &RangeImage,
     features: &SurfaceFeatures,
     camera: &Camera,
     params: &Params,
     seed: u64,
-) -> (Segmentation, Info) {
+    scratch: &mut Scratch,
+    out_seg: &mut Segmentation,
+) -> Info {
+    let Scratch { geo, labels, k, queue, cand, merge: mbufs, fill_planes } = scratch;
     let (wu, hu) = range.dimensions();
     let (w, h) = (wu as usize, hu as usize);
     let n = w * h;
@@ -369,26 +388,36 @@ pub(crate) fn run(
         .find(|&i| r[i].is_finite())
         .and_then(|i| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i])))
         .unwrap_or([0.0; 3]);
-    let (geo, mut labels, growable) = match *camera {
-        Camera::Abw(cal) => geometry_abw(cal, r, features, params, w, h, origin),
-        Camera::Pinhole { .. } => geometry(&PinholeProj(*camera), r, features, params, w, h, origin),
-        Camera::Grid => geometry(&GridProj, r, features, params, w, h, origin),
+    let growable = match *camera {
+        Camera::Abw(cal) => geometry_abw(cal, r, features, params, (w, h), origin, (geo, labels)),
+        Camera::Pinhole { .. } => {
+            geometry(&PinholeProj(*camera), r, features, params, (w, h), origin, (geo, labels))
+        }
+        Camera::Grid => geometry(&GridProj, r, features, params, (w, h), origin, (geo, labels)),
     };
-    let mut k = vec![0.0f32; pn];
-    set_frame(&mut k, pw, f32::NAN);
+    let labels = &mut labels[..];
+    // The per-label vectors get room for every label a frame of this size can have (memory that is reserved,
+    // and touched only as far as used), so frames with more regions than the first reuse them too.
+    let max_labels = (params.max_seeds as usize).min(n) + 1;
+    mbufs.reserve(max_labels);
+    fill_planes.clear();
+    fill_planes.reserve(max_labels);
+    sized(k, pn);
+    set_frame(k, pw, f32::NAN);
     for (y, row) in features.k.rows().enumerate() {
         let dst = (y + 1) * pw + 1;
         k[dst..dst + w].copy_from_slice(row);
     }
     let p = pw as isize;
     let offs = [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1];
-    let ctx = Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo, k, origin, camera };
+    let ctx =
+        Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo: &geo[..], k: &k[..], origin, camera };
 
     // Seeds: random draws without replacement among the candidates, grown one after the other.
     let mut info = Info::default();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut queue: Vec<u32> = Vec::with_capacity(n);
-    let mut cand: Vec<u32> = Vec::new();
+    queue.clear();
+    queue.reserve(n);
     let mut t = params.t_sigma;
     let mut next = 1u32;
     let stride = params.seed_stride_px as usize;
@@ -415,20 +444,20 @@ pub(crate) fn run(
             let j = rng.random_range(0..=i as u32) as usize;
             cand.swap(i, j);
         }
-        for &c in &cand {
+        for &c in cand.iter() {
             if info.n_seeds >= params.max_seeds || left < min_left {
                 break;
             }
             info.n_draws += 1;
             let c = c as usize;
-            if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, &labels) {
+            if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, labels) {
                 continue;
             }
             let grown = match (paper, ctx.eight) {
-                (true, false) => grow_paper::<4>(&ctx, params, c, next, &mut labels, &mut queue),
-                (true, true) => grow_paper::<8>(&ctx, params, c, next, &mut labels, &mut queue),
-                (false, false) => grow_default::<4>(&ctx, params, c, next, &mut labels, &mut queue),
-                (false, true) => grow_default::<8>(&ctx, params, c, next, &mut labels, &mut queue),
+                (true, false) => grow_paper::<4>(&ctx, params, c, next, labels, queue),
+                (true, true) => grow_paper::<8>(&ctx, params, c, next, labels, queue),
+                (false, false) => grow_default::<4>(&ctx, params, c, next, labels, queue),
+                (false, true) => grow_default::<8>(&ctx, params, c, next, labels, queue),
             };
             left -= grown;
             next += 1;
@@ -451,10 +480,10 @@ pub(crate) fn run(
 
     // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
     let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(&mut labels, next - 1, pw, ctx.eight, &ctx.geo, &ctx.k, params, &toward);
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
-    let stats = merged.stats;
+    let stats = &mbufs.stats;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
     // Drop small regions.
@@ -478,10 +507,10 @@ pub(crate) fn run(
     let used: Vec<bool> = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
 
     if params.fill_unlabelled {
-        info.n_filled_px = fill(&ctx, params, &stats, &used, &mut labels, &mut queue);
+        info.n_filled_px = fill(&ctx, params, (stats, &used), labels, queue, fill_planes);
         if params.merge_after_fill && info.n_filled_px > 0 {
             // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(&mut labels, next - 1, pw, ctx.eight, &ctx.geo, &ctx.k, params, &toward);
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
         }
@@ -489,7 +518,8 @@ pub(crate) fn run(
 
     // Final statistics under the current labels, then relabel 1..n in raster order of first
     // pixel while copying out of the padded grid (one pass).
-    let stats = region_stats(&labels, next - 1, &ctx.geo, &ctx.k);
+    region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut mbufs.stats);
+    let stats = &mbufs.stats;
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];
@@ -498,8 +528,11 @@ pub(crate) fn run(
     }
     let n_regions = order.len() as u32;
     info.n_regions = n_regions;
-    let regions = order.iter().zip(1..).map(|(&old, l)| region_of(&ctx, l, &stats[old as usize])).collect();
-    let mut out = Vec::with_capacity(n);
+    out_seg.regions.clear();
+    out_seg.regions.extend(order.iter().zip(1..).map(|(&old, l)| region_of(&ctx, l, &stats[old as usize])));
+    let mut out = std::mem::take(&mut out_seg.labels).into_vec();
+    out.clear();
+    out.reserve(n);
     let mut unlabelled = 0u32;
     for (y, rrow) in r.chunks_exact(w.max(1)).take(h).enumerate() {
         let src = ctx.pad(0, y);
@@ -508,10 +541,10 @@ pub(crate) fn run(
         unlabelled += lrow.iter().zip(rrow).map(|(&l, v)| u32::from(l == 0 && v.is_finite())).sum::<u32>();
     }
     info.n_unlabelled_valid_px = unlabelled;
-    let labels = Grid::from_vec(wu, hu, out).expect("same size");
-    let c1 = borders(&labels, params.c1_one_sided);
+    out_seg.labels = Grid::from_vec(wu, hu, out).expect("same size");
+    borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
     tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
-    (Segmentation { labels, regions, c1 }, info)
+    info
 }
 
 /// Unit normal (toward the sensor) of the local plane with slopes `(a, b)` (range units per
@@ -580,7 +613,7 @@ fn grow_default<const N: usize>(
     // The residual limit: max_res, raised to rms_ratio × the region's RMS at each refit.
     let mut lim = max_res;
     let refit_min = params.refit_every_px as usize;
-    let geo = &ctx.geo[..];
+    let geo = ctx.geo;
     queue.clear();
     queue.push(seed as u32);
     labels[seed] = id;
@@ -641,7 +674,7 @@ fn grow_paper<const N: usize>(
 ) -> usize {
     let offs: [isize; N] = std::array::from_fn(|d| ctx.offs[d]);
     let max_dk = f64::from(params.max_k_diff);
-    let k = &ctx.k[..];
+    let k = ctx.k;
     queue.clear();
     queue.push(seed as u32);
     labels[seed] = id;
@@ -720,20 +753,22 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
 fn fill(
     ctx: &Ctx<'_>,
     params: &Params,
-    stats: &[Stats],
-    used: &[bool],
+    (stats, used): (&[Stats], &[bool]),
     labels: &mut [u32],
     queue: &mut Vec<u32>,
+    planes: &mut Vec<Option<Plane>>,
 ) -> u32 {
     let max_res = f64::from(params.fill_max_residual);
     let offs: [isize; 4] = std::array::from_fn(|d| ctx.offs[d]);
-    let geo = &ctx.geo[..];
+    let geo = ctx.geo;
     // Planes of the surviving regions (fitted in both modes: this step is geometric).
-    let planes: Vec<Option<Plane>> = stats
-        .iter()
-        .zip(used)
-        .map(|(s, &u)| if u && s.count >= 3 { Plane::fit(&s.mom, |p| ctx.toward(p)) } else { None })
-        .collect();
+    planes.clear();
+    planes.extend(
+        stats
+            .iter()
+            .zip(used)
+            .map(|(s, &u)| if u && s.count >= 3 { Plane::fit(&s.mom, |p| ctx.toward(p)) } else { None }),
+    );
     // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
     let free = |labels: &[u32], j: usize| labels[j] == 0 && geo[j][0].is_finite();
     queue.clear();
@@ -835,8 +870,9 @@ mod tests {
                 [Params::default(), Params::paper(), Params { max_slant_deg: 40.0, ..Params::default() }]
             {
                 let origin = Camera::Abw(cal).point(3.0, 5.0, 100.0).unwrap();
-                let (g0, l0, n0) = geometry(&AbwProj(cal), r, &s.features, &params, w, h, origin);
-                let (g1, l1, n1) = geometry_abw(cal, r, &s.features, &params, w, h, origin);
+                let (mut g0, mut l0, mut g1, mut l1) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                let n0 = geometry(&AbwProj(cal), r, &s.features, &params, (w, h), origin, (&mut g0, &mut l0));
+                let n1 = geometry_abw(cal, r, &s.features, &params, (w, h), origin, (&mut g1, &mut l1));
                 assert_eq!((n0, &l0), (n1, &l1));
                 assert!(n0 > 1000, "{n0} growable pixels");
                 for (a, b) in g0.iter().zip(&g1) {

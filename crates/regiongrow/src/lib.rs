@@ -273,7 +273,7 @@ pub struct Info {
 }
 
 /// The output of [`grow`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Segmentation {
     /// 0 = none, regions 1..=n numbered in raster order of their first pixel.
     pub labels: LabelImage,
@@ -296,6 +296,38 @@ pub fn grow(
     params: &Params,
     seed: u64,
 ) -> (Segmentation, Info) {
+    let mut out = Segmentation::default();
+    let info = grow_into(range, features, camera, params, seed, &mut Scratch::default(), &mut out);
+    (out, info)
+}
+
+/// The working buffers of [`grow_into`] (padded geometry, labels and K, the growth queue), kept between
+/// frames so a stream of same-sized images allocates them once.
+#[derive(Debug, Clone, Default)]
+pub struct Scratch {
+    geo: Vec<[f32; 6]>,
+    labels: Vec<u32>,
+    k: Vec<f32>,
+    queue: Vec<u32>,
+    cand: Vec<u32>,
+    merge: merge::MergeBufs,
+    fill_planes: Vec<Option<plane::Plane>>,
+}
+
+/// [`grow`] into `out` (its grids reused when they have the image's size) with the buffers of `scratch`;
+/// the same result, bit for bit.
+///
+/// # Panics
+/// As [`grow`].
+pub fn grow_into(
+    range: &RangeImage,
+    features: &SurfaceFeatures,
+    camera: &Camera,
+    params: &Params,
+    seed: u64,
+    scratch: &mut Scratch,
+    out: &mut Segmentation,
+) -> Info {
     let _s = tracing::info_span!("regiongrow", w = range.width(), h = range.height()).entered();
     debug_assert_eq!(params.validate(), Ok(()), "regiongrow::grow: invalid params");
     let need_sizes = [
@@ -307,7 +339,7 @@ pub fn grow(
     for (name, ok) in need_sizes {
         assert!(ok, "regiongrow::grow: features.{name} differs in size from the range image");
     }
-    grow::run(range, features, camera, params, seed)
+    grow::run(range, features, camera, params, seed, scratch, out)
 }
 
 /// Region border pixels C1 of a label image.
@@ -321,10 +353,19 @@ pub fn grow(
 /// line; a labelled pixel next to label 0 is still marked (the 0 side cannot carry the border).
 #[must_use]
 pub fn borders(labels: &LabelImage, one_sided: bool) -> EdgeMap {
+    let mut out = EdgeMap::default();
+    borders_into(labels, one_sided, &mut out);
+    out
+}
+
+/// [`borders`] into `out`, whose memory is reused.
+pub fn borders_into(labels: &LabelImage, one_sided: bool, out_map: &mut EdgeMap) {
     let (w, h) = labels.dimensions();
     let l = labels.as_slice();
     let (w, h) = (w as usize, h as usize);
-    let mut out = vec![false; w * h];
+    let mut out = std::mem::take(out_map).into_vec();
+    out.clear();
+    out.resize(w * h, false);
     // One pixel given its four neighbours; a missing neighbour (image frame) is passed as the
     // pixel's own label, which never differs from it and is never 0 where it is labelled.
     let test = |a: u32, left: u32, right: u32, up: u32, down: u32| -> bool {
@@ -353,7 +394,7 @@ pub fn borders(labels: &LabelImage, one_sided: bool) -> EdgeMap {
             *o = test(a, lf, rt, u, d);
         }
     }
-    Grid::from_vec(labels.width(), labels.height(), out).expect("same size")
+    *out_map = Grid::from_vec(labels.width(), labels.height(), out).expect("same size");
 }
 
 #[cfg(test)]

@@ -42,13 +42,28 @@ impl Stats {
 ///
 /// Runs of equal labels along the raster are accumulated in a local copy (same addition order as
 /// pixel by pixel, so the sums are bit-identical), which keeps the hot loop out of memory.
+#[cfg(test)]
 pub(crate) fn region_stats<const N: usize>(
     labels: &[u32],
     max_label: u32,
     pts: &[[f32; N]],
     k: &[f32],
 ) -> Vec<Stats> {
-    let mut st = vec![Stats { first: u32::MAX, ..Stats::default() }; max_label as usize + 1];
+    let mut st = Vec::new();
+    region_stats_into(labels, max_label, pts, k, &mut st);
+    st
+}
+
+/// [`region_stats`] into `st`, whose memory is reused.
+pub(crate) fn region_stats_into<const N: usize>(
+    labels: &[u32],
+    max_label: u32,
+    pts: &[[f32; N]],
+    k: &[f32],
+    st: &mut Vec<Stats>,
+) {
+    st.clear();
+    st.resize(max_label as usize + 1, Stats { first: u32::MAX, ..Stats::default() });
     let n = labels.len();
     assert!(pts.len() == n && k.len() == n && N >= 3, "region_stats: array sizes differ");
     let mut i = 0;
@@ -101,7 +116,6 @@ pub(crate) fn region_stats<const N: usize>(
         s.sum_k = acc[9];
         st[l as usize] = s;
     }
-    st
 }
 
 /// The merge thresholds, pre-converted.
@@ -173,10 +187,32 @@ impl Criterion {
     }
 }
 
-/// Outcome of [`merge`].
-pub(crate) struct Merged {
-    /// Statistics indexed by label; valid for every label still present in the image.
+/// The per-label working vectors of [`merge`], kept between frames; `stats` holds its result.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct MergeBufs {
+    /// Statistics indexed by label; after [`merge`], valid for every label still present in the image.
     pub(crate) stats: Vec<Stats>,
+    planes: Vec<Option<Plane>>,
+    parent: Vec<u32>,
+    pairs: Vec<(u32, u32)>,
+    cand: Vec<(f64, u32, u32, u32, u32)>,
+}
+
+impl MergeBufs {
+    /// Room for labels `0..n` in every per-label vector (emptied), so a later frame with more regions does
+    /// not reallocate them.
+    pub(crate) fn reserve(&mut self, n: usize) {
+        self.stats.clear();
+        self.stats.reserve(n);
+        self.planes.clear();
+        self.planes.reserve(n);
+        self.parent.clear();
+        self.parent.reserve(n);
+    }
+}
+
+/// Outcome of [`merge`] (the statistics are left in [`MergeBufs::stats`]).
+pub(crate) struct Merged {
     /// Merge operations.
     pub(crate) n_merged: u32,
     /// Passes over the adjacency graph.
@@ -199,24 +235,25 @@ pub(crate) fn merge<const N: usize>(
     k: &[f32],
     params: &Params,
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
+    bufs: &mut MergeBufs,
 ) -> Merged {
-    let mut stats = region_stats(labels, max_label, pts, k);
+    let MergeBufs { stats, planes, parent, pairs, cand } = bufs;
+    region_stats_into(labels, max_label, pts, k, stats);
     let crit = Criterion::new(params);
     let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
-    let mut planes: Vec<Option<Plane>> =
-        stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }).collect();
-    let mut parent: Vec<u32> = (0..=max_label).collect();
-
-    let mut pairs = adjacent_pairs(labels, width, eight);
+    planes.clear();
+    planes.extend(stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }));
+    parent.clear();
+    parent.extend(0..=max_label);
+    adjacent_pairs_into(labels, width, eight, pairs);
 
     let mut n_merged = 0;
     let mut n_passes = 0;
-    let mut cand: Vec<(f64, u32, u32, u32, u32)> = Vec::new();
     loop {
         n_passes += 1;
         cand.clear();
-        for &(a, b) in &pairs {
-            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        for &(a, b) in pairs.iter() {
+            let (ra, rb) = (find(parent, a), find(parent, b));
             if ra == rb {
                 continue;
             }
@@ -232,8 +269,8 @@ pub(crate) fn merge<const N: usize>(
         cand.sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
         cand.dedup_by(|p, q| p.1 == q.1 && p.2 == q.2);
         let mut changed = false;
-        for &(_, _, _, a, b) in &cand {
-            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        for &(_, _, _, a, b) in cand.iter() {
+            let (ra, rb) = (find(parent, a), find(parent, b));
             if ra == rb {
                 continue;
             }
@@ -254,7 +291,7 @@ pub(crate) fn merge<const N: usize>(
         }
         // Shrink the graph to root pairs for the next pass.
         for p in pairs.iter_mut() {
-            let (ra, rb) = (find(&mut parent, p.0), find(&mut parent, p.1));
+            let (ra, rb) = (find(parent, p.0), find(parent, p.1));
             *p = (ra.min(rb), ra.max(rb));
         }
         pairs.retain(|p| p.0 != p.1);
@@ -264,18 +301,19 @@ pub(crate) fn merge<const N: usize>(
     if n_merged > 0 {
         for l in labels.iter_mut() {
             if *l != 0 {
-                *l = find(&mut parent, *l);
+                *l = find(parent, *l);
             }
         }
     }
-    Merged { stats, n_merged, n_passes }
+    Merged { n_merged, n_passes }
 }
 
-/// The region adjacency graph of `labels` (rows of `width`): every pair `(a, b)`, `0 < a < b`, of
-/// labels on adjacent pixels (right, down, and the two lower diagonals with `eight`), sorted, once.
-fn adjacent_pairs(labels: &[u32], width: usize, eight: bool) -> Vec<(u32, u32)> {
+/// The region adjacency graph of `labels` (rows of `width`) into `pairs`: every pair `(a, b)`,
+/// `0 < a < b`, of labels on adjacent pixels (right, down, and the two lower diagonals with `eight`),
+/// sorted, once.
+fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Vec<(u32, u32)>) {
     let height = labels.len().checked_div(width).unwrap_or(0);
-    let mut pairs: Vec<(u32, u32)> = Vec::new();
+    pairs.clear();
     // Pairs of one pixel `x` of `row` with its right and lower (and lower diagonal) neighbours.
     let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>| {
         let mut push = |a: u32, b: u32| {
@@ -314,19 +352,18 @@ fn adjacent_pairs(labels: &[u32], width: usize, eight: bool) -> Vec<(u32, u32)> 
                 let diff = r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | (p ^ q) | (p ^ s));
                 if diff != 0 {
                     for xx in x..x + CHUNK {
-                        scan(row, below, xx, &mut pairs);
+                        scan(row, below, xx, pairs);
                     }
                 }
                 x += CHUNK;
             }
         }
         for xx in x..width {
-            scan(row, below, xx, &mut pairs);
+            scan(row, below, xx, pairs);
         }
     }
     pairs.sort_unstable();
     pairs.dedup();
-    pairs
 }
 
 #[cfg(test)]
@@ -365,7 +402,17 @@ mod tests {
         let toward = |_p: [f64; 3]| [0.0, 0.0, -1.0];
         let run = |labels: &[u32]| {
             let mut l = labels.to_vec();
-            let m = merge(&mut l, max, w as usize, false, &pts, s.features.k.as_slice(), &params, &toward);
+            let m = merge(
+                &mut l,
+                max,
+                w as usize,
+                false,
+                &pts,
+                s.features.k.as_slice(),
+                &params,
+                &toward,
+                &mut Default::default(),
+            );
             (canonical(&l), m.n_merged)
         };
         let (reference, n_merged) = run(&base);
@@ -396,10 +443,10 @@ mod tests {
         let k = vec![0.0f32; 16];
         let toward = |_p: [f64; 3]| [0.0, 0.0, -1.0];
         let mut l = labels0.clone();
-        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::paper(), &toward);
+        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::paper(), &toward, &mut Default::default());
         assert_eq!((m.n_merged, l.iter().all(|&v| v == 1)), (1, true));
         let mut l = labels0.clone();
-        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::default(), &toward);
+        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::default(), &toward, &mut Default::default());
         assert_eq!((m.n_merged, l), (0, labels0));
     }
 

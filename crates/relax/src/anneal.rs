@@ -119,6 +119,17 @@ fn metropolis(u: f64, x: f64) -> bool {
     if x > 37.0 { u == 0.0 && (-x).exp() > 0.0 } else { u < (-x).exp() }
 }
 
+/// The per-cell arrays of a [`State`], kept between frames (see [`crate::Scratch`]).
+#[derive(Default)]
+pub(crate) struct Buffers {
+    flags: Vec<u8>,
+    c1d2: Vec<u16>,
+    vals: [Vec<f32>; 2],
+    pos: Vec<u32>,
+    /// The C2 occupancy of [`State::recompute_at`].
+    occ2: Vec<bool>,
+}
+
 /// The mutable annealing state on a padded grid (pad cells are invalid, so a move can never
 /// leave the image and window scans need no bounds checks).
 pub(crate) struct State {
@@ -162,6 +173,8 @@ pub(crate) struct State {
     ab: f64,
     /// Pending (padded cell, new d²) updates of the last C2 proposal.
     scratch: Vec<(u32, u16)>,
+    /// The C2 occupancy of [`State::recompute_at`], kept for its next call.
+    occ2: Vec<bool>,
     /// New d² of the C1 point of the last C1 proposal.
     pending: u16,
 }
@@ -181,7 +194,7 @@ impl State {
         lambda: f64,
         ab: f64,
     ) -> Self {
-        let mut st = Self::scaled(c1, c2, [s1, mag], [1.0, 1.0], valid, term, lambda);
+        let mut st = Self::scaled(c1, c2, [s1, mag], [1.0, 1.0], valid, term, lambda, Buffers::default());
         st.ab = ab;
         st.ext_sum = ab;
         st
@@ -200,8 +213,10 @@ impl State {
         valid: &Grid<bool>,
         term: DistanceTerm,
         lambda: f64,
+        bufs: Buffers,
     ) -> Self {
         let [s1, mag] = strengths;
+        let Buffers { mut flags, mut c1d2, vals: [mut v0, mut v1], mut pos, occ2 } = bufs;
         let (w, h) = (c1.width() as usize, c1.height() as usize);
         let r = term.cap.floor() as usize;
         let pad = r + 1;
@@ -211,15 +226,29 @@ impl State {
         let pad_right = (win_w - r).max(pad);
         let pw = w + pad + pad_right;
         let ph = h + 2 * pad;
+        // Memory of the previous frame, refilled (fresh vectors on the first).
+        flags.clear();
+        flags.resize(pw * ph, 0);
+        c1d2.clear();
+        c1d2.resize(pw * ph, EMPTY);
+        for v in [&mut v0, &mut v1] {
+            v.clear();
+            v.resize(pw * ph, 0.0);
+        }
+        // Room for every point a frame of this size can have (C1 and C2 each at most one per pixel), so a later
+        // frame with more edge points reuses the memory (reserved memory is touched only as far as used).
+        pos.clear();
+        pos.reserve(2 * w * h);
         let mut st = Self {
             w,
             h,
             pad,
             pw,
-            flags: vec![0; pw * ph],
-            c1d2: vec![EMPTY; pw * ph],
-            vals: [vec![0.0; pw * ph], vec![0.0; pw * ph]],
-            pos: Vec::new(),
+            flags,
+            c1d2,
+            vals: [v0, v1],
+            pos,
+            occ2,
             n1: 0,
             disk: Vec::new(),
             start: Vec::new(),
@@ -359,8 +388,10 @@ impl State {
 
     /// Full recomputation of (Eⁱ, Eᵉ) for the points at padded positions `pos` (same point
     /// order as `self.pos`), from scratch: a fresh C2 occupancy grid and a fresh nearest search.
-    pub(crate) fn recompute_at(&self, pos: &[u32]) -> (f64, f64) {
-        let mut occ2 = vec![false; self.flags.len()];
+    pub(crate) fn recompute_at(&mut self, pos: &[u32]) -> (f64, f64) {
+        let mut occ2 = std::mem::take(&mut self.occ2);
+        occ2.clear();
+        occ2.resize(self.flags.len(), false);
         for &p in &pos[self.n1..] {
             occ2[p as usize] = true;
         }
@@ -375,7 +406,13 @@ impl State {
         for (k, &p) in pos.iter().enumerate() {
             ext += f64::from(self.vals[usize::from(k >= self.n1)][p as usize]);
         }
+        self.occ2 = occ2;
         (e_int, self.ab - ext)
+    }
+
+    /// The per-cell arrays, for the next frame's state.
+    pub(crate) fn into_buffers(self) -> Buffers {
+        Buffers { flags: self.flags, c1d2: self.c1d2, vals: self.vals, pos: self.pos, occ2: self.occ2 }
     }
 
     /// (ΔEⁱ, change of the external sum) of moving point `i` by neighbour `dir`, or `None` if the
@@ -563,10 +600,18 @@ impl State {
     }
 
     /// Edge maps (C1, C2) of the points at padded positions `pos`.
+    #[cfg(test)]
     pub(crate) fn maps(&self, pos: &[u32]) -> (EdgeMap, EdgeMap) {
+        let (mut c1, mut c2) = (EdgeMap::default(), EdgeMap::default());
+        self.maps_into(pos, &mut c1, &mut c2);
+        (c1, c2)
+    }
+
+    /// [`State::maps`] into `c1` and `c2`, whose memory is reused.
+    pub(crate) fn maps_into(&self, pos: &[u32], c1: &mut EdgeMap, c2: &mut EdgeMap) {
         let (w, h) = (self.w as u32, self.h as u32);
-        let mut c1 = Grid::new(w, h, false);
-        let mut c2 = Grid::new(w, h, false);
+        c1.reset(w, h, false);
+        c2.reset(w, h, false);
         for (k, &p) in pos.iter().enumerate() {
             let (py, px) = (p as usize / self.pw, p as usize % self.pw);
             let (x, y) = ((px - self.pad) as u32, (py - self.pad) as u32);
@@ -576,7 +621,6 @@ impl State {
                 c2[(x, y)] = true;
             }
         }
-        (c1, c2)
     }
 
     /// Checks every cached d² against a fresh search (tests only).

@@ -143,7 +143,7 @@ impl Params {
 }
 
 /// The relaxed edge sets.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Relaxed {
     /// Pruned and relaxed region borders.
     pub c1: EdgeMap,
@@ -168,12 +168,21 @@ impl Relaxed {
 /// If the sizes differ.
 #[must_use]
 pub fn union(a: &EdgeMap, b: &EdgeMap) -> EdgeMap {
+    let mut u = EdgeMap::default();
+    union_into(a, b, &mut u);
+    u
+}
+
+/// [`union`] into `out`, whose memory is reused.
+///
+/// # Panics
+/// If the sizes differ.
+pub fn union_into(a: &EdgeMap, b: &EdgeMap, out: &mut EdgeMap) {
     assert!(a.same_size(b), "edge maps differ in size");
-    let mut u = a.clone();
-    for (e, &v) in u.as_mut_slice().iter_mut().zip(b.as_slice()) {
+    out.copy_from(a);
+    for (e, &v) in out.as_mut_slice().iter_mut().zip(b.as_slice()) {
         *e |= v;
     }
-    u
 }
 
 /// Diagnostics of one [`relax`] run. Energies are in the (normalised) units of the crate docs.
@@ -227,18 +236,24 @@ pub struct Energy {
 /// If the maps differ in size.
 #[must_use]
 pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
-    assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
-    let p2 = within(c2, c1, t_d_px);
-    let p1 = within(c1, &p2, t_d_px);
+    let (mut p1, mut p2) = (EdgeMap::default(), EdgeMap::default());
+    prune_into(c1, c2, t_d_px, &mut p1, &mut p2);
     (p1, p2)
 }
 
-/// The points of `query` at Euclidean distance ≤ `t_px` from a point of `mask` (exact: the
+/// [`prune`] into `p1` and `p2`, whose memory is reused.
+fn prune_into(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64, p1: &mut EdgeMap, p2: &mut EdgeMap) {
+    assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
+    within_into(c2, c1, t_d_px, p2);
+    within_into(c1, p2, t_d_px, p1);
+}
+
+/// Writes into `out` the points of `query` at Euclidean distance ≤ `t_px` from a point of `mask` (exact: the
 /// same decision as thresholding the squared EDT of `mask`, but only O(pixels / 64 + |query|·t)).
 /// The mask is packed into one bitset per row; a query pixel (x, y) is kept if for some
 /// `|dy| ≤ t` row `y + dy` has a mask bit within `x ± rx(dy)`, `rx(dy)` the largest integer with
 /// `rx² + dy² ≤ t²`. Rows are tried nearest first, so most queries stop after one or two.
-fn within(query: &EdgeMap, mask: &EdgeMap, t_px: f64) -> EdgeMap {
+fn within_into(query: &EdgeMap, mask: &EdgeMap, t_px: f64, out: &mut EdgeMap) {
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let words = w.div_ceil(64);
     let mut bits = vec![0u64; words * h];
@@ -260,7 +275,7 @@ fn within(query: &EdgeMap, mask: &EdgeMap, t_px: f64) -> EdgeMap {
         }
         row[wl] & lo_mask != 0 || row[wl + 1..wh].iter().any(|&v| v != 0) || row[wh] & hi_mask != 0
     };
-    let mut out = query.clone();
+    out.copy_from(query);
     let o = out.as_mut_slice();
     for_each_set(query.as_slice(), |i| {
         let (x, y) = (i % w, i / w);
@@ -269,7 +284,6 @@ fn within(query: &EdgeMap, mask: &EdgeMap, t_px: f64) -> EdgeMap {
             (dy <= y && any(y - dy, lo, hi)) || (dy > 0 && y + dy < h && any(y + dy, lo, hi))
         });
     });
-    out
 }
 
 /// Calls `f(i)` for every `i` with `mask[i]`, in increasing order; 32-wide all-false blocks are
@@ -401,6 +415,40 @@ pub struct Input<'a> {
 /// If the grids differ in size; in debug builds also if `params` is invalid ([`Params::validate`]).
 #[must_use]
 pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
+    let mut out = Relaxed::default();
+    let info = relax_into(input, params, seed, &mut Scratch::default(), &mut out);
+    (out, info)
+}
+
+/// The working buffers of [`relax_into`] (the pruned maps, the annealing state's per-cell arrays, the
+/// point lists), kept between frames so a stream of same-sized images allocates them once.
+#[derive(Default)]
+pub struct Scratch {
+    p1: EdgeMap,
+    p2: EdgeMap,
+    supported: EdgeMap,
+    state: anneal::Buffers,
+    initial: Vec<u32>,
+    best: Vec<u32>,
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("relax::Scratch").finish_non_exhaustive()
+    }
+}
+
+/// [`relax`] into `out` (its maps reused) with the buffers of `scratch`; the same result, bit for bit.
+///
+/// # Panics
+/// As [`relax`].
+pub fn relax_into(
+    input: &Input<'_>,
+    params: &Params,
+    seed: u64,
+    scratch: &mut Scratch,
+    out: &mut Relaxed,
+) -> Info {
     let Input { c1, s1, c2, magnitude, valid } = *input;
     let _s = tracing::info_span!("relax", w = c1.width(), h = c1.height()).entered();
     for (name, ok) in [
@@ -413,15 +461,20 @@ pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
     }
     debug_assert_eq!(params.validate(), Ok(()), "relax::relax: invalid params");
     let count = |m: &EdgeMap| m.as_slice().iter().filter(|&&b| b).count() as u32;
-    let (p1, p2) = prune(c1, c2, params.t_d_px);
+    let Scratch { p1, p2, supported, state, initial, best } = scratch;
+    prune_into(c1, c2, params.t_d_px, p1, p2);
+    let (p1, p2) = (&*p1, &*p2);
     let mut info =
-        Info { removed_c1: count(c1) - count(&p1), removed_c2: count(c2) - count(&p2), ..Info::default() };
+        Info { removed_c1: count(c1) - count(p1), removed_c2: count(c2) - count(p2), ..Info::default() };
     tracing::debug!(removed_c1 = info.removed_c1, removed_c2 = info.removed_c2, "pruned");
-    let div = [divisor(s1, &p1, params.normalize), divisor(magnitude, &p2, params.normalize)];
+    let div = [divisor(s1, p1, params.normalize), divisor(magnitude, p2, params.normalize)];
     let term = DistanceTerm::new(params.distance_cap_px());
     // Scaling fused into the state (the same values and A + B as `scaled` / `external_sum`).
-    let mut st = State::scaled(&p1, &p2, [s1, magnitude], div, valid, term, params.lambda);
-    let initial = st.pos.clone();
+    let bufs = std::mem::take(state);
+    let mut st = State::scaled(p1, p2, [s1, magnitude], div, valid, term, params.lambda, bufs);
+    initial.clear();
+    initial.reserve(st.pos.capacity());
+    initial.extend_from_slice(&st.pos);
     // The state's initial sums are a full computation already: Eⁱ summed over C1 in the same
     // order as `State::recompute_at`, and Eᵉ = A + B − (the same sums in the same order) = 0.
     let (ei0, ee0) = (st.e_int, 0.0);
@@ -431,7 +484,9 @@ pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
     info.e_external_before = ee0;
 
     let n = st.len();
-    let mut best = initial.clone();
+    best.clear();
+    best.reserve(st.pos.capacity());
+    best.extend_from_slice(initial);
     if n > 0 && params.max_sweeps > 0 {
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
         let mut coins = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x9E37_79B9_7F4A_7C15);
@@ -460,9 +515,9 @@ pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
             }
         }
     }
-    let (mut ei1, mut ee1) = st.recompute_at(&best);
+    let (mut ei1, mut ee1) = st.recompute_at(best);
     if ei1 + params.lambda * ee1 > e0 {
-        best = initial;
+        std::mem::swap(best, initial);
         (ei1, ee1) = (ei0, ee0);
     }
     info.energy_after = ei1 + params.lambda * ee1;
@@ -471,11 +526,16 @@ pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
     info.acceptance_rate =
         if info.moves_tried > 0 { info.moves_accepted as f64 / info.moves_tried as f64 } else { 0.0 };
     tracing::debug!(?info, "relaxed");
-    let (r1, r2) = st.maps(&best);
-    let supported = if params.support_px > 0.0 { within(&r2, &p1, params.support_px) } else { r2.clone() };
-    info.unsupported_c2 = count(&r2) - count(&supported);
-    let edges = union(&r1, &supported);
-    (Relaxed { c1: r1, c2: r2, edges }, info)
+    st.maps_into(best, &mut out.c1, &mut out.c2);
+    *state = st.into_buffers();
+    if params.support_px > 0.0 {
+        within_into(&out.c2, p1, params.support_px, supported);
+    } else {
+        supported.copy_from(&out.c2);
+    }
+    info.unsupported_c2 = count(&out.c2) - count(supported);
+    union_into(&out.c1, supported, &mut out.edges);
+    info
 }
 
 #[cfg(test)]
@@ -542,8 +602,9 @@ mod tests {
     }
 
     /// The incrementally kept energies of `st` equal a recomputation at its current positions.
-    fn assert_energy_is_recomputed(st: &State, lambda: f64) {
-        let (ei, ee) = st.recompute_at(&st.pos.clone());
+    fn assert_energy_is_recomputed(st: &mut State, lambda: f64) {
+        let pos = st.pos.clone();
+        let (ei, ee) = st.recompute_at(&pos);
         assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
         assert_relative_eq!(st.energy(), ei + lambda * ee, epsilon = 1e-9, max_relative = 1e-6);
     }
@@ -567,7 +628,7 @@ mod tests {
                 let t = if m < 3000 { 2.0 } else { 0.05 };
                 if st.step(&mut rng, t) {
                     accepted += 1;
-                    assert_energy_is_recomputed(&st, params.lambda);
+                    assert_energy_is_recomputed(&mut st, params.lambda);
                     if accepted % 97 == 0 {
                         assert!(st.cache_consistent(), "seed {seed}, move {m}: stale nearest-distance cache");
                     }
@@ -616,7 +677,16 @@ mod tests {
             let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
             let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
             let term = DistanceTerm::new(params.distance_cap_px());
-            let mut st = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term, params.lambda);
+            let mut st = State::scaled(
+                &p1,
+                &p2,
+                [&c.s1, &c.mag],
+                div,
+                &c.valid,
+                term,
+                params.lambda,
+                Default::default(),
+            );
             let n = st.len();
             assert!(n > 50, "seed {seed}: too few points ({n})");
             let mut moves = Xoshiro256PlusPlus::seed_from_u64(seed);
@@ -624,7 +694,7 @@ mod tests {
             let mut accepted = 0;
             for t in [3.0, 1.0, 0.3, 0.1, 0.01, 0.0] {
                 accepted += st.sweep(&mut moves, &mut coins, t, n);
-                assert_energy_is_recomputed(&st, params.lambda);
+                assert_energy_is_recomputed(&mut st, params.lambda);
                 assert!(st.cache_consistent(), "seed {seed}, t {t}: stale nearest-distance cache");
             }
             assert!(accepted > 100, "seed {seed}: only {accepted} accepted moves");
@@ -645,7 +715,7 @@ mod tests {
             let term = || DistanceTerm::new(4.0);
             let a = State::new(&p1, &p2, &s1n, &magn, &c.valid, term(), 1.0, ab);
             let div = [divisor(&c.s1, &p1, normalize), divisor(&c.mag, &p2, normalize)];
-            let b = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term(), 1.0);
+            let b = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term(), 1.0, Default::default());
             assert_eq!(a.strengths(), b.strengths(), "seed {seed}");
             assert_eq!(a.pos, b.pos);
             assert_eq!(a.e_int, b.e_int);

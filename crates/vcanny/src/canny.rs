@@ -40,8 +40,14 @@ pub(crate) fn absolute_thresholds(t: &Thresholds, mag: &[f32], ok: &[bool]) -> (
 }
 
 /// The `(low, high)` absolute thresholds for `mag` over the `ok` pixels, given their [`Histogram`] if already made.
-pub(crate) fn thresholds(t: &Thresholds, mag: &[f32], ok: &[bool], hist: Option<&Histogram>) -> (f32, f32) {
-    let quantiles = |qs: &[f32]| match hist {
+pub(crate) fn thresholds(
+    t: &Thresholds,
+    mag: &[f32],
+    ok: &[bool],
+    hist: Option<&mut Histogram>,
+) -> (f32, f32) {
+    let mut hist = hist;
+    let mut quantiles = |qs: &[f32]| match hist.as_deref_mut() {
         Some(hs) => hs.quantiles(mag, ok, qs),
         None => {
             let mut hs = Histogram::new();
@@ -102,12 +108,20 @@ pub(crate) fn masked_quantiles(mag: &[f32], ok: &[bool], qs: &[f32]) -> Vec<f32>
 pub(crate) struct Histogram {
     counts: Vec<u32>,
     n: usize,
+    /// The second-level counts of [`Histogram::quantiles`], kept to be reused.
+    low: Vec<u32>,
 }
 
 impl Histogram {
     /// An empty histogram.
     pub(crate) fn new() -> Self {
-        Self { counts: vec![0; 1 << 16], n: 0 }
+        Self { counts: vec![0; 1 << 16], n: 0, low: Vec::new() }
+    }
+
+    /// Empties the histogram, keeping its memory.
+    pub(crate) fn reset(&mut self) {
+        self.counts.fill(0);
+        self.n = 0;
     }
 
     /// Counts the values of `mag` where `ok` (a row while it is in cache, or the whole image).
@@ -126,12 +140,14 @@ impl Histogram {
     /// The `qs`-quantiles (nearest rank, as [`quantile`]) of `mag` over the `ok` pixels, the values this
     /// histogram counted; `+inf` if there are none. Radix select: the bucket of the top 16 key bits holding the
     /// rank, then the low 16 bits by counting the keys of that bucket.
-    pub(crate) fn quantiles(&self, mag: &[f32], ok: &[bool], qs: &[f32]) -> Vec<f32> {
+    pub(crate) fn quantiles(&mut self, mag: &[f32], ok: &[bool], qs: &[f32]) -> Vec<f32> {
         if self.n == 0 {
             return vec![f32::INFINITY; qs.len()];
         }
-        let mut low = vec![0u32; 1 << 16];
-        qs.iter()
+        let mut low = std::mem::take(&mut self.low);
+        low.resize(1 << 16, 0);
+        let out = qs
+            .iter()
             .map(|&q| {
                 let mut k = quantile_rank(self.n, q);
                 let mut bucket = 0;
@@ -157,7 +173,9 @@ impl Histogram {
                 }
                 from_order_key(bucket << 16 | lo as u32)
             })
-            .collect()
+            .collect();
+        self.low = low;
+        out
     }
 }
 
@@ -166,25 +184,30 @@ impl Histogram {
 #[cfg(test)]
 pub(crate) fn hysteresis(mag: &[f32], cand: &[bool], w: usize, h: usize, low: f32, high: f32) -> Vec<bool> {
     let mut state: Vec<u8> = cand.iter().map(|&c| u8::from(c)).collect();
-    hysteresis_in_place(mag, &mut state, w, h, low, high)
+    let mut out = Vec::new();
+    hysteresis_in_place(mag, &mut state, w, h, (low, high), (&mut out, &mut Vec::new()));
+    out
 }
 
-/// [`hysteresis`] on candidates given as `state` (0 or 1 per pixel), used as the flood's scratch.
+/// [`hysteresis`] on candidates given as `state` (0 or 1 per pixel), used as the flood's scratch, into `out`.
 pub(crate) fn hysteresis_in_place(
     mag: &[f32],
     state: &mut [u8],
     w: usize,
     h: usize,
-    low: f32,
-    high: f32,
-) -> Vec<bool> {
+    (low, high): (f32, f32),
+    (out, stack): (&mut Vec<bool>, &mut Vec<(u32, u32)>),
+) {
     // Bit 0 = weak (candidate ≥ low), bit 1 = also strong (≥ high); 4 = edge (visited).
     for (s, &m) in state.iter_mut().zip(mag) {
         let weak = *s & u8::from(m >= low);
         *s = weak | (weak & u8::from(m >= high)) << 1;
     }
     const STRONG: u64 = u64::from_le_bytes([2; 8]);
-    let mut stack: Vec<(usize, usize)> = Vec::new();
+    // The flood's stack: each pixel enters it at most once; room for all of them up front (reserved memory is
+    // touched only as far as used), so a later frame with larger edge chains does not reallocate it.
+    stack.clear();
+    stack.reserve(w * h);
     let mut i = 0;
     while i < w * h {
         // Skip 8 pixels at a time while none is strong.
@@ -194,14 +217,15 @@ pub(crate) fn hysteresis_in_place(
         }
         if state[i] & 2 != 0 {
             state[i] = 4;
-            stack.push((i % w, i / w));
+            stack.push(((i % w) as u32, (i / w) as u32));
             while let Some((x, y)) = stack.pop() {
+                let (x, y) = (x as usize, y as usize);
                 for yy in y.saturating_sub(1)..(y + 2).min(h) {
                     for xx in x.saturating_sub(1)..(x + 2).min(w) {
                         let k = yy * w + xx;
                         if state[k] & 3 != 0 {
                             state[k] = 4;
-                            stack.push((xx, yy));
+                            stack.push((xx as u32, yy as u32));
                         }
                     }
                 }
@@ -209,5 +233,6 @@ pub(crate) fn hysteresis_in_place(
         }
         i += 1;
     }
-    state.iter().map(|&s| s == 4).collect()
+    out.clear();
+    out.extend(state.iter().map(|&s| s == 4));
 }

@@ -84,6 +84,7 @@ pub(crate) fn gaussian(sigma_px: f32, kernel_px: u32) -> Vec<f32> {
 }
 
 /// Magnitude and non-maximum-suppression candidates of the whole image.
+#[derive(Debug, Clone, Default)]
 pub(crate) struct Gradient {
     /// The pixels that take part: valid and every channel finite.
     pub(crate) ok: Vec<bool>,
@@ -134,6 +135,8 @@ fn horizontal(pad: &[f32], g: &[f32], dst: &mut [f32]) {
 /// Smooths each weighted channel over the `ok` pixels (Gaussian normalised by the smoothed mask), takes Sobel
 /// derivatives, combines them with the Di Zenzo tensor into magnitude and direction, and suppresses
 /// non-maxima. Channels of weight 0 are skipped. The magnitudes of the ok pixels are counted into `hist`.
+/// The result reuses the memory of `bufs`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn gradient(
     input: &Input<'_>,
     weights: &[f32],
@@ -142,11 +145,16 @@ pub(crate) fn gradient(
     h: usize,
     g: &[f32],
     mut hist: Option<&mut crate::canny::Histogram>,
+    bufs: Gradient,
 ) -> Gradient {
     let n = w * h;
-    let mut ok = vec![false; n];
-    let mut magnitude = vec![0.0f32; n];
-    let mut candidates = vec![0u8; n];
+    let Gradient { mut ok, mut magnitude, mut candidates } = bufs;
+    ok.clear();
+    ok.resize(n, false);
+    magnitude.clear();
+    magnitude.resize(n, 0.0);
+    candidates.clear();
+    candidates.resize(n, 0);
     if n == 0 {
         return Gradient { ok, magnitude, candidates };
     }

@@ -125,7 +125,7 @@ impl Params {
 }
 
 /// Detected edges and the gradient magnitude.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Edges {
     /// The edge set (C2): `true` = edge pixel; never at no-data pixels.
     pub edges: EdgeMap,
@@ -145,7 +145,25 @@ pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, para
         .entered();
     assert!(!channels.is_empty(), "vcanny::detect needs at least one channel");
     assert!(channels.iter().all(|c| c.same_size(valid)), "channels and mask differ in size");
-    run(&gradient::Input::Stack(channels), weights, Some(valid), valid.dimensions(), params)
+    let mut out = Edges::default();
+    let input = gradient::Input::Stack(channels);
+    run(&input, weights, Some(valid), valid.dimensions(), params, &mut Scratch::default(), &mut out);
+    out
+}
+
+/// The working buffers of [`detect_planes_into`] (the per-pixel flags, candidates and threshold histogram),
+/// kept between frames so a stream of same-sized images allocates them once.
+#[derive(Default)]
+pub struct Scratch {
+    grad: gradient::Gradient,
+    hist: Option<canny::Histogram>,
+    stack: Vec<(u32, u32)>,
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("vcanny::Scratch").finish_non_exhaustive()
+    }
 }
 
 /// Canny on the plane parameters `[a, b, c]` with the weights of `params`.
@@ -154,9 +172,26 @@ pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, para
 /// If `plane` and `valid` differ in size; in debug builds also if `params` is invalid.
 #[must_use]
 pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> Edges {
+    let mut out = Edges::default();
+    detect_planes_into(plane, valid, params, &mut Scratch::default(), &mut out);
+    out
+}
+
+/// [`detect_planes`] into `out` (its grids reused) with the buffers of `scratch`; the same result, bit for bit.
+///
+/// # Panics
+/// As [`detect_planes`].
+pub fn detect_planes_into(
+    plane: &PlaneMap,
+    valid: &Grid<bool>,
+    params: &Params,
+    scratch: &mut Scratch,
+    out: &mut Edges,
+) {
     let _s = tracing::info_span!("vcanny", w = valid.width(), h = valid.height(), channels = 3).entered();
     assert!(plane.same_size(valid), "plane map and mask differ in size");
-    run(&gradient::Input::Planes(plane.as_slice()), &params.weights, Some(valid), valid.dimensions(), params)
+    let input = gradient::Input::Planes(plane.as_slice());
+    run(&input, &params.weights, Some(valid), valid.dimensions(), params, scratch, out);
 }
 
 /// Canny on the raw range image (the baseline of the paper's Table I); `params.weights` is not used.
@@ -166,17 +201,29 @@ pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> E
 #[must_use]
 pub fn detect_raw(range: &RangeImage, params: &Params) -> Edges {
     let _s = tracing::info_span!("vcanny", w = range.width(), h = range.height(), channels = 1).entered();
-    run(&gradient::Input::Stack(&[range]), &[1.0], None, range.dimensions(), params)
+    let mut out = Edges::default();
+    run(
+        &gradient::Input::Stack(&[range]),
+        &[1.0],
+        None,
+        range.dimensions(),
+        params,
+        &mut Scratch::default(),
+        &mut out,
+    );
+    out
 }
 
-/// The detector on `input`; `valid = None` means every pixel (where the channels are finite).
+/// The detector on `input` into `out`; `valid = None` means every pixel (where the channels are finite).
 fn run(
     input: &gradient::Input<'_>,
     weights: &[f32],
     valid: Option<&Grid<bool>>,
     (wu, hu): (u32, u32),
     params: &Params,
-) -> Edges {
+    scratch: &mut Scratch,
+    out: &mut Edges,
+) {
     debug_assert_eq!(params.validate(), Ok(()), "invalid vcanny params");
     assert_eq!(input.len(), weights.len(), "one weight per channel");
     assert!(
@@ -186,15 +233,27 @@ fn run(
     let (w, h) = (wu as usize, hu as usize);
     let g = gradient::gaussian(params.sigma_px, params.kernel_px);
     // Quantile thresholds count the magnitudes while each row is in cache.
-    let mut hist = (params.thresholds.mode != ThresholdMode::Absolute).then(canny::Histogram::new);
-    let mut grad = gradient::gradient(input, weights, valid.map(|v| v.as_slice()), w, h, &g, hist.as_mut());
-    let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist.as_ref());
-    let edges = canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, low, high);
+    let hist = if params.thresholds.mode == ThresholdMode::Absolute {
+        None
+    } else {
+        let hs = scratch.hist.get_or_insert_with(canny::Histogram::new);
+        hs.reset();
+        Some(hs)
+    };
+    let mut bufs = std::mem::take(&mut scratch.grad);
+    // The magnitude is written into the output grid's memory.
+    bufs.magnitude = std::mem::take(&mut out.magnitude).into_vec();
+    let valid = valid.map(|v| v.as_slice());
+    let mut hist = hist;
+    let mut grad = gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs);
+    let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist);
+    let mut edges = std::mem::take(&mut out.edges).into_vec();
+    let bufs = (&mut edges, &mut scratch.stack);
+    canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, (low, high), bufs);
     tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
-    Edges {
-        edges: Grid::from_vec(wu, hu, edges).expect("size matches"),
-        magnitude: Grid::from_vec(wu, hu, grad.magnitude).expect("size matches"),
-    }
+    out.edges = Grid::from_vec(wu, hu, edges).expect("size matches");
+    out.magnitude = Grid::from_vec(wu, hu, std::mem::take(&mut grad.magnitude)).expect("size matches");
+    scratch.grad = grad;
 }
 
 #[cfg(test)]
