@@ -119,6 +119,8 @@ impl Config {
         // Plain components have no region-growing borders to close their contours.
         c.segment.gap_close_px = 2.0;
         c.segment.min_region_px = 50;
+        // The specification fills every left-over pixel.
+        c.segment.fill_max_residual = 0.0;
         c
     }
 
@@ -415,7 +417,14 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "segment.merge_max_residual",
         "Regions mode: largest RMS distance of each region's points to the other's plane for a merge.",
     ),
-    ("segment.fill_max_residual", "Largest distance of a filled pixel to its region's plane (0 = no limit)."),
+    (
+        "segment.fill_max_residual",
+        "Largest distance of a filled pixel to the plane of the region it joins (0 = no limit).",
+    ),
+    (
+        "segment.fill_rms_ratio",
+        "With fill_max_residual > 0, a region's limit is the larger of it and this × the region's RMS (0 = fill_max_residual alone).",
+    ),
 ];
 
 /// The comment of `key` (`table.key`) in [`KEY_DOCS`].

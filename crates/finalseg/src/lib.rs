@@ -82,7 +82,7 @@ pub fn segment(
     let mut pieces = Pieces::fit(&scene, comp, &sizes, guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
-    fill::fill(&scene, &mut pieces.comp, &pieces.planes, params.fill_max_residual);
+    fill::fill(&scene, &mut pieces.comp, &pieces.planes, params.fill_max_residual, params.fill_rms_ratio);
 
     // 4. Merge adjacent regions over unsupported borders with agreeing planes.
     let mut parent: Vec<u32> = (0..=pieces.planes.len() as u32).collect();
@@ -269,6 +269,32 @@ mod tests {
             assert_eq!(regions.len(), 1);
             assert_eq!(labels[(6, 6)], want, "limit {limit}");
             assert_eq!(labels[(20, 20)], 1);
+        }
+    }
+
+    /// `fill_rms_ratio`: a rough plane (a ±2-unit checker ripple, RMS 2) keeps a pixel 4 units off it that the
+    /// absolute limit of 3 alone would leave unlabelled; a pixel 20 units off stays 0 either way.
+    #[test]
+    fn fill_limit_follows_the_region_scatter() {
+        let hole = |x: u32, y: u32| (5..7).contains(&x) && (5..7).contains(&y);
+        let far = |x: u32, y: u32| (30..32).contains(&x) && (20..22).contains(&y);
+        let range = Grid::from_fn(40, 30, |x, y| {
+            let ripple = if (x + y) % 2 == 0 { 2.0 } else { -2.0 };
+            if hole(x, y) {
+                104.0
+            } else if far(x, y) {
+                120.0
+            } else {
+                100.0 + ripple
+            }
+        });
+        let edges = Grid::from_fn(40, 30, |x, y| hole(x, y) || far(x, y));
+        let base = Params { min_region_px: 10, fill_max_residual: 3.0, ..Params::default() };
+        for (ratio, want) in [(0.0, 0u32), (3.0, 1)] {
+            let p = Params { fill_rms_ratio: ratio, ..base.clone() };
+            let (labels, _) = segment(&range, &Camera::Grid, &edges, None, &p);
+            assert_eq!(labels[(5, 5)], want, "ratio {ratio}");
+            assert_eq!(labels[(30, 20)], 0, "ratio {ratio}");
         }
     }
 

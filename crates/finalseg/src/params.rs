@@ -58,6 +58,10 @@ pub struct Params {
     /// dropped is not swallowed by its neighbour (which would make that neighbour an
     /// under-segmentation of both).
     pub fill_max_residual: f64,
+    /// With `fill_max_residual` > 0, the limit of a region is the larger of `fill_max_residual` and this
+    /// multiple of the RMS distance of its core points to its plane (0 = `fill_max_residual` alone): a surface
+    /// a plane fits only roughly (8-bit staircases, depth encodings that bend planes) keeps its pixels.
+    pub fill_rms_ratio: f64,
 }
 
 impl Default for Params {
@@ -72,7 +76,8 @@ impl Default for Params {
             within_max_rms_ratio: 1.5,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 2.0,
-            fill_max_residual: 0.0,
+            fill_max_residual: 3.0,
+            fill_rms_ratio: 3.0,
         }
     }
 }
@@ -87,6 +92,7 @@ impl Params {
         ParamError::in_range("segment.min_border_support", self.min_border_support, 0.0, 1.0)?;
         ParamError::at_least("segment.within_max_rms_ratio", self.within_max_rms_ratio, 1.0)?;
         ParamError::in_range("segment.merge_max_angle_deg", self.merge_max_angle_deg, 0.0, 90.0)?;
+        ParamError::at_least("segment.fill_rms_ratio", self.fill_rms_ratio, 0.0)?;
         ParamError::at_least("segment.fill_max_residual", self.fill_max_residual, 0.0)?;
         ParamError::at_least("segment.merge_max_residual", self.merge_max_residual, 0.0)?;
         Ok(())
