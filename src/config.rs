@@ -417,13 +417,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "segment.merge_max_residual",
         "Regions mode: largest RMS distance of each region's points to the other's plane for a merge.",
     ),
-    (
-        "segment.fill_max_residual",
-        "Largest distance of a filled pixel to the plane of the region it joins (0 = no limit).",
-    ),
+    ("segment.fill_max_residual", "Largest distance of a filled pixel to its region's plane (0 = no limit)."),
     (
         "segment.fill_rms_ratio",
-        "With fill_max_residual > 0, a region's limit is the larger of it and this × the region's RMS (0 = fill_max_residual alone).",
+        "The fill limit of a region is at least this × its RMS distance to its own plane (0 = fill_max_residual alone).",
     ),
 ];
 

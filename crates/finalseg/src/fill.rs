@@ -6,18 +6,27 @@ use crate::plane::Plane;
 
 const NBR8: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
 
+/// How far from its plane a pixel may be and still join a region.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Limit {
+    /// The limit in sensor units (0 = none).
+    pub(crate) max_residual: f64,
+    /// A region's limit is at least this × its plane's RMS (when `max_residual` > 0).
+    pub(crate) rms_ratio: f64,
+}
+
+impl Limit {
+    /// Whether a pixel at distance `res` from `plane` is too far to join it.
+    fn refuses(&self, res: f64, plane: &Plane) -> bool {
+        self.max_residual > 0.0 && res > self.max_residual.max(self.rms_ratio * plane.rms)
+    }
+}
+
 /// Fills the unlabelled valid pixels of `comp` ring by ring (`planes[l − 1]` is the plane of label
 /// `l`). Each ring is decided from the labels of the previous rings only, so the order of pixels
-/// within a ring does not matter. With `fill_limit` > 0, a pixel farther from its best plane than
-/// that plane's limit (the larger of `fill_limit` and `rms_ratio` × the region's RMS) stays 0 and
-/// grows no further ring.
-pub(crate) fn fill(
-    scene: &Scene<'_>,
-    comp: &mut [u32],
-    planes: &[Option<Plane>],
-    fill_limit: f64,
-    rms_ratio: f64,
-) {
+/// within a ring does not matter. A pixel beyond `limit` from its best plane stays 0 and grows no
+/// further ring.
+pub(crate) fn fill(scene: &Scene<'_>, comp: &mut [u32], planes: &[Option<Plane>], limit: Limit) {
     let mut in_ring = vec![false; scene.w * scene.h];
     let mut ring = first_ring(scene, comp, &mut in_ring);
     let mut assign = Vec::new();
@@ -26,9 +35,9 @@ pub(crate) fn fill(
     while !ring.is_empty() {
         rings += 1;
         assign.clear();
-        assign.extend(ring.iter().map(|&(x, y)| {
-            best_label(scene, comp, planes, (x as usize, y as usize), (fill_limit, rms_ratio))
-        }));
+        assign.extend(
+            ring.iter().map(|&(x, y)| best_label(scene, comp, planes, x as usize, y as usize, limit)),
+        );
         for (&(x, y), &l) in ring.iter().zip(&assign) {
             comp[y as usize * scene.w + x as usize] = l;
         }
@@ -59,17 +68,17 @@ fn first_ring(scene: &Scene<'_>, comp: &[u32], in_ring: &mut [bool]) -> Vec<(u32
 }
 
 /// The label of the 8-adjacent region whose plane fits the ring pixel (x, y) best (ties to the
-/// smaller label), or 0 if `fill_limit` > 0 and the pixel is farther from that plane than its limit,
-/// the larger of `fill_limit` and `rms_ratio` × the region's RMS.
+/// smaller label), or 0 if that plane is beyond `limit`.
 fn best_label(
     scene: &Scene<'_>,
     comp: &[u32],
     planes: &[Option<Plane>],
-    (x, y): (usize, usize),
-    (fill_limit, rms_ratio): (f64, f64),
+    x: usize,
+    y: usize,
+    limit: Limit,
 ) -> u32 {
     let p = scene.point(x, y).expect("ring pixels are valid");
-    let mut best: Option<(f64, u32, f64)> = None;
+    let mut best: Option<(f64, u32, &Plane)> = None;
     let mut last = 0u32;
     for_neighbours(x, y, scene.w, scene.h, |j, _, _| {
         let l = comp[j];
@@ -80,12 +89,12 @@ fn best_label(
         let plane = planes[l as usize - 1].as_ref().expect("labelled pixels belong to kept regions");
         let res = plane.residual(p);
         if best.is_none_or(|(br, bl, _)| res < br || (res == br && l < bl)) {
-            best = Some((res, l, fill_limit.max(rms_ratio * plane.rms)));
+            best = Some((res, l, plane));
         }
     });
-    let (res, l, limit) = best.expect("ring pixels touch a region");
+    let (res, l, plane) = best.expect("ring pixels touch a region");
     // A pixel too far from every adjacent plane stays 0 (and grows no further ring).
-    if fill_limit > 0.0 && res > limit { 0 } else { l }
+    if limit.refuses(res, plane) { 0 } else { l }
 }
 
 /// The next ring into `next`: the valid unlabelled pixels not yet in a ring that are 8-adjacent to

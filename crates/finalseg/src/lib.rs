@@ -82,7 +82,8 @@ pub fn segment(
     let mut pieces = Pieces::fit(&scene, comp, &sizes, guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
-    fill::fill(&scene, &mut pieces.comp, &pieces.planes, params.fill_max_residual, params.fill_rms_ratio);
+    let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
+    fill::fill(&scene, &mut pieces.comp, &pieces.planes, limit);
 
     // 4. Merge adjacent regions over unsupported borders with agreeing planes.
     let mut parent: Vec<u32> = (0..=pieces.planes.len() as u32).collect();

@@ -92,8 +92,8 @@ impl Params {
         ParamError::in_range("segment.min_border_support", self.min_border_support, 0.0, 1.0)?;
         ParamError::at_least("segment.within_max_rms_ratio", self.within_max_rms_ratio, 1.0)?;
         ParamError::in_range("segment.merge_max_angle_deg", self.merge_max_angle_deg, 0.0, 90.0)?;
-        ParamError::at_least("segment.fill_rms_ratio", self.fill_rms_ratio, 0.0)?;
         ParamError::at_least("segment.fill_max_residual", self.fill_max_residual, 0.0)?;
+        ParamError::at_least("segment.fill_rms_ratio", self.fill_rms_ratio, 0.0)?;
         ParamError::at_least("segment.merge_max_residual", self.merge_max_residual, 0.0)?;
         Ok(())
     }
