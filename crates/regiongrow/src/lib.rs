@@ -111,8 +111,8 @@ pub struct Params {
     /// is ≤ this, in camera units.
     pub merge_max_residual: f32,
     /// Default mode: adjacent regions also merge, whatever their normals and mean K, when the one
-    /// plane fitted to both has an RMS distance ≤ `merge_max_residual` and ≤ this × the larger of
-    /// their own RMS distances (0 = off). Thin regions (stripes, strips of a staircase) have normals
+    /// plane fitted to both has an RMS distance ≤ `merge_max_residual` and ≤ this × the
+    /// pixel-weighted RMS distance of their own fits (0 = off). Thin regions (stripes, strips of a staircase) have normals
     /// the angle test cannot trust; the joint fit can.
     pub merge_joint_rms_ratio: f32,
     /// Regions with fewer pixels become unlabelled (0).
@@ -153,7 +153,7 @@ impl Default for Params {
             max_slant_deg: 80.0,
             refit_every_px: 16,
             merge_max_angle_deg: 10.0,
-            merge_max_residual: 2.0,
+            merge_max_residual: 4.0,
             merge_joint_rms_ratio: 1.2,
             min_region_px: 200,
             connectivity: 4,
