@@ -102,7 +102,17 @@ fn esc(s: &str) -> String {
 type Table = (&'static str, String, Vec<&'static str>, Vec<Vec<String>>);
 
 fn tables(r: &Report) -> Vec<Table> {
-    let rows = &r.rows;
+    vec![
+        edge_table(&r.rows),
+        relaxation_table(&r.rows),
+        hoover_table(&r.rows),
+        per_image_table(&r.rows),
+        timings_table(r),
+    ]
+}
+
+/// Table I: the edge maps against C1 and ground truth.
+fn edge_table(rows: &[ImageRow]) -> Table {
     let edge_row = |name: &str, pick: &dyn Fn(&ImageScores) -> &EdgeScores| -> Vec<String> {
         let e = |f: &dyn Fn(&EdgeScores) -> f64| ms(rows.iter().map(|x| f(pick(&x.scores))), 4);
         vec![
@@ -142,6 +152,19 @@ fn tables(r: &Report) -> Vec<Table> {
             "—".into(),
         ],
     ];
+    (
+        "Edge maps: Table I (Canny on raw depth vs on plane parameters), C1 and the final map",
+        format!(
+            "Tolerance {} px. Paper precision (Eq. 7) against C1 is the paper's protocol; against ground truth and the boundary P/R/F are the honest versions (one-to-one: both maps thinned to one pixel, as BSDS). The paper's row was measured elsewhere (the 30 real ABW test images).",
+            rangeseg::evaluate::TOLERANCE_PX
+        ),
+        edge_header,
+        table1,
+    )
+}
+
+/// Table II: C2 before and the final edge map after relaxation, per image.
+fn relaxation_table(rows: &[ImageRow]) -> Table {
     let mut table2: Vec<Vec<String>> = rows
         .iter()
         .map(|x| {
@@ -178,6 +201,16 @@ fn tables(r: &Report) -> Vec<Table> {
             mean_std(rows.iter().map(|x| x.scores.relaxed.matched.f - x.scores.c2.matched.f)).0
         ),
     ]);
+    (
+        "Table II: before (C2) vs after relaxation (final C), per image",
+        "Paper precision against the initial C1 (the paper's protocol; it reports +3.20% on average on real ABW) and one-to-one boundary F against ground truth.".into(),
+        vec!["image", "precision C2", "precision relaxed", "Δ precision", "F C2", "F relaxed", "Δ F"],
+        table2,
+    )
+}
+
+/// Hoover et al.'s region metrics and Jin et al.'s rate, with published rows for scale.
+fn hoover_table(rows: &[ImageRow]) -> Table {
     let hoover_row = |name: &str,
                       pick: &dyn Fn(&ImageScores) -> &eval::hoover::HooverScore,
                       jin: &dyn Fn(&ImageScores) -> &eval::JinScore|
@@ -209,6 +242,27 @@ fn tables(r: &Report) -> Vec<Table> {
         hoover_row("final segmentation (ours)", &|s| &s.hoover_final, &|s| &s.jin_final),
     ];
     hoover.extend(published_rows(rows));
+    (
+        "Hoover et al. region metrics at T = 0.8 (mean ± std per image)",
+        "Rows marked 'measured elsewhere' are published figures on other images or by other rules, for scale only. Jin et al.'s rate: a GT plane counts as detected when one machine region covers 80 % of it (their calculateROC.m, one-sided), Σ detected ÷ Σ GT planes.".into(),
+        vec![
+            "segmenter",
+            "GT regions",
+            "correct",
+            "correct % (Σ correct ÷ Σ GT)",
+            "angle error (°)",
+            "over",
+            "under",
+            "missed",
+            "noise",
+            "Jin et al. rate",
+        ],
+        hoover,
+    )
+}
+
+/// Per image: region growing alone, the final segmentation and the three edge maps.
+fn per_image_table(rows: &[ImageRow]) -> Table {
     let per_image: Vec<Vec<String>> = rows
         .iter()
         .map(|x| {
@@ -226,6 +280,17 @@ fn tables(r: &Report) -> Vec<Table> {
             ]
         })
         .collect();
+    (
+        "Per image: region growing alone, final segmentation and the three edge maps",
+        "Hoover correct detections at T = 0.8, the final segmentation's over-/under-segmentations and noise regions, one-to-one boundary F of C1, C2 and the final edge map C.".into(),
+        vec!["image", "GT regions", "correct (RG)", "correct (final)", "over / under", "noise", "F C1", "F C2", "F C"],
+        per_image,
+    )
+}
+
+/// Per-stage timings.
+fn timings_table(r: &Report) -> Table {
+    let rows = &r.rows;
     let t = |f: &dyn Fn(&ImageRow) -> f64| ms(rows.iter().map(f), 1);
     let timings = vec![vec![
         t(&|x| x.read_ms),
@@ -236,58 +301,18 @@ fn tables(r: &Report) -> Vec<Table> {
         t(&|x| x.write_ms),
         t(&|x| x.total_ms),
     ]];
-    vec![
-        (
-            "Edge maps: Table I (Canny on raw depth vs on plane parameters), C1 and the final map",
-            format!(
-                "Tolerance {} px. Paper precision (Eq. 7) against C1 is the paper's protocol; against ground truth and the boundary P/R/F are the honest versions (one-to-one: both maps thinned to one pixel, as BSDS). The paper's row was measured elsewhere (the 30 real ABW test images).",
-                rangeseg::evaluate::TOLERANCE_PX
-            ),
-            edge_header,
-            table1,
+    (
+        "Per-stage timings (ms per image, mean ± std)",
+        format!(
+            "{} images on {} thread{}; whole evaluation {:.1} s wall time.",
+            rows.len(),
+            r.threads,
+            if r.threads == 1 { "" } else { "s" },
+            r.wall_s
         ),
-        (
-            "Table II: before (C2) vs after relaxation (final C), per image",
-            "Paper precision against the initial C1 (the paper's protocol; it reports +3.20% on average on real ABW) and one-to-one boundary F against ground truth.".into(),
-            vec!["image", "precision C2", "precision relaxed", "Δ precision", "F C2", "F relaxed", "Δ F"],
-            table2,
-        ),
-        (
-            "Hoover et al. region metrics at T = 0.8 (mean ± std per image)",
-            "Rows marked 'measured elsewhere' are published figures on other images or by other rules, for scale only. Jin et al.'s rate: a GT plane counts as detected when one machine region covers 80 % of it (their calculateROC.m, one-sided), Σ detected ÷ Σ GT planes.".into(),
-            vec![
-                "segmenter",
-                "GT regions",
-                "correct",
-                "correct % (Σ correct ÷ Σ GT)",
-                "angle error (°)",
-                "over",
-                "under",
-                "missed",
-                "noise",
-                "Jin et al. rate",
-            ],
-            hoover,
-        ),
-        (
-            "Per image: region growing alone, final segmentation and the three edge maps",
-            "Hoover correct detections at T = 0.8, the final segmentation's over-/under-segmentations and noise regions, one-to-one boundary F of C1, C2 and the final edge map C.".into(),
-            vec!["image", "GT regions", "correct (RG)", "correct (final)", "over / under", "noise", "F C1", "F C2", "F C"],
-            per_image,
-        ),
-        (
-            "Per-stage timings (ms per image, mean ± std)",
-            format!(
-                "{} images on {} thread{}; whole evaluation {:.1} s wall time.",
-                rows.len(),
-                r.threads,
-                if r.threads == 1 { "" } else { "s" },
-                r.wall_s
-            ),
-            vec!["read", "features", "regiongrow", "vcanny", "relax + final", "write", "total"],
-            timings,
-        ),
-    ]
+        vec!["read", "features", "regiongrow", "vcanny", "relax + final", "write", "total"],
+        timings,
+    )
 }
 
 /// Published figures for scale, chosen by the data set's file names: Hoover et al. (1996) for ABW names, Jin et

@@ -6,25 +6,6 @@ fn main() {
     divan::main();
 }
 
-/// A 512×512 8-bit-like scene: a tilted floor, a roof-shaped box and a slanted box, plus a shadow of no data.
-fn scene(side: u32) -> RangeImage {
-    let s = f64::from(side) / 512.0;
-    Grid::from_fn(side, side, |x, y| {
-        let (xf, yf) = (f64::from(x) / s, f64::from(y) / s);
-        if (300.0..330.0).contains(&xf) && (100.0..400.0).contains(&yf) {
-            return f32::NAN;
-        }
-        let z = if (100.0..300.0).contains(&xf) && (100.0..400.0).contains(&yf) {
-            120.0 + 0.3 * (xf - 200.0).abs() - 0.1 * yf
-        } else if (350.0..480.0).contains(&xf) && (50.0..200.0).contains(&yf) {
-            90.0 + 0.2 * xf - 0.15 * yf
-        } else {
-            200.0 - 0.2 * yf + 0.05 * xf
-        };
-        z.round() as f32
-    })
-}
-
 /// Plane parameters of the scene: the analytic planes plus quantisation-like wobble (bench setup only).
 fn planes(range: &RangeImage) -> PlaneMap {
     let (w, h) = range.dimensions();
@@ -41,7 +22,7 @@ fn planes(range: &RangeImage) -> PlaneMap {
 
 #[divan::bench(args = [512])]
 fn detect_planes(b: divan::Bencher, side: u32) {
-    let img = scene(side);
+    let img = rangeimage::testing::bench_scene(side);
     let pl = planes(&img);
     let valid = img.map(|v| v.is_finite());
     let p = vcanny::Params::default();
@@ -50,7 +31,7 @@ fn detect_planes(b: divan::Bencher, side: u32) {
 
 #[divan::bench(args = [512])]
 fn detect_raw(b: divan::Bencher, side: u32) {
-    let img = scene(side);
+    let img = rangeimage::testing::bench_scene(side);
     let p = vcanny::Params::default();
     b.bench(|| vcanny::detect_raw(divan::black_box(&img), &p));
 }
