@@ -283,7 +283,11 @@ pub fn grow(
     for (name, ok) in need_sizes {
         assert!(ok, "regiongrow::grow: features.{name} differs in size from the range image");
     }
-    grow::run(range, features, camera, params, seed)
+    // Compiled for the best instruction set of this CPU (bit-identical on every one).
+    isa::dispatch(
+        #[inline(always)]
+        || grow::run(range, features, camera, params, seed),
+    )
 }
 
 /// Region border pixels C1 of a label image.

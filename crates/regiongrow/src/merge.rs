@@ -41,6 +41,7 @@ impl Stats {
 ///
 /// Runs of equal labels along the raster are accumulated in a local copy (same addition order as
 /// pixel by pixel, so the sums are bit-identical), which keeps the hot loop out of memory.
+#[inline(always)] // into `grow::run`, compiled for each instruction set
 pub(crate) fn region_stats<const N: usize>(
     labels: &[u32],
     max_label: u32,

@@ -170,7 +170,11 @@ fn run(
     let g = gradient::gaussian(params.sigma_px, params.kernel_px);
     // Quantile thresholds count the magnitudes while each row is in cache.
     let mut hist = (params.thresholds.mode != ThresholdMode::Absolute).then(canny::Histogram::new);
-    let mut grad = gradient::gradient(input, weights, valid.map(|v| v.as_slice()), w, h, &g, hist.as_mut());
+    // The per-pixel passes, compiled for the best instruction set of this CPU (bit-identical on every one).
+    let mut grad = isa::dispatch(
+        #[inline(always)]
+        || gradient::gradient(input, weights, valid.map(|v| v.as_slice()), w, h, &g, hist.as_mut()),
+    );
     let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist.as_ref());
     let edges = canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, low, high);
     tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
