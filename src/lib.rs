@@ -12,4 +12,4 @@ pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams};
 pub use output::write_outputs;
 pub use pipeline::{Output, segment};
 pub use planes::{Plane, planes};
-pub use {eval, features, rangeimage, rangeio, regiongrow, relax, vcanny};
+pub use {eval, features, isa, rangeimage, rangeio, regiongrow, relax, vcanny};

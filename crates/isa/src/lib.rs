@@ -2,9 +2,11 @@
 //!
 //! The default build targets baseline x86-64, so one binary or wheel runs on any x86-64 CPU. A stage wraps a
 //! hot loop in [`dispatch`]: the loop is compiled a second time with the x86-64-v3 features (AVX, AVX2, FMA,
-//! BMI1/2, LZCNT; pulp's `V3`) and that copy runs when the CPU has them. The loop's body must be inlined into
-//! the closure (`#[inline(always)]` on the function it calls, and on what that calls if LLVM would not inline
-//! it) to be compiled for those features; what is not inlined runs the baseline code.
+//! BMI1/2, LZCNT; pulp's `V3`) and that copy runs when the CPU has them. Only code inlined into pulp's
+//! target-feature function is compiled for those features: the closure itself must be `#[inline(always)]`
+//! (`isa::dispatch(#[inline(always)] || kernel(..))`, allowed in argument position), and so must `kernel` and
+//! what it calls in the hot loop; a function left out of line runs its baseline code (a profile shows it by
+//! name next to `pulp::x86::v3::V3::vectorize::imp`).
 //!
 //! Every path gives the same bits: Rust never contracts `a * b + c` into an FMA, never reorders a float
 //! reduction, and `mul_add`, `sqrt` and the libm calls are correctly rounded or the same call on every path.
@@ -78,6 +80,19 @@ pub fn set_limit(isa: Isa) {
     LIMIT.store(isa as u8, Ordering::Relaxed);
 }
 
+/// Applies the `RANGESEG_ISA` environment variable (`baseline` or `v3`), if set, with [`set_limit`] and returns
+/// it; the binaries call this first. An unknown value is an error naming it.
+pub fn limit_from_env() -> Result<Option<Isa>, String> {
+    let Some(value) = std::env::var_os("RANGESEG_ISA") else {
+        return Ok(None);
+    };
+    let value = value.to_string_lossy();
+    let isa = Isa::from_name(value.trim())
+        .ok_or_else(|| format!("RANGESEG_ISA={value}: expected one of baseline, v3"))?;
+    set_limit(isa);
+    Ok(Some(isa))
+}
+
 /// The instruction set [`dispatch`] uses on this thread now: the one [`with_isa`] imposes, else the fastest
 /// available one within [`set_limit`]'s ceiling.
 pub fn selected() -> Isa {
@@ -105,8 +120,8 @@ pub fn with_isa<R>(isa: Isa, f: impl FnOnce() -> R) -> Option<R> {
     Some(f())
 }
 
-/// Runs `kernel` compiled for the [`selected`] instruction set. What `kernel` calls is compiled for it only if
-/// inlined into it: mark the loop's function `#[inline(always)]`.
+/// Runs `kernel` compiled for the [`selected`] instruction set. Pass an `#[inline(always)]` closure and mark the
+/// functions of the loop `#[inline(always)]`: only what is inlined is compiled for it (see the crate docs).
 #[inline(always)]
 pub fn dispatch<R>(kernel: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
