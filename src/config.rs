@@ -134,6 +134,8 @@ impl Config {
         // Plain components have no region-growing borders to close their contours.
         c.segment.gap_close_px = 2.0;
         c.segment.min_region_px = 50;
+        // The specification fills every left-over pixel.
+        c.segment.fill_max_residual = 0.0;
         c
     }
 

@@ -15,11 +15,20 @@ fn main() -> ExitCode {
     exit_cleanly_on_signals();
     match cli::run(args) {
         Ok(code) => code,
+        // A closed pipe (`rangeseg score --json … | head`) ends the output; nothing is wrong.
+        Err(err) if is_broken_pipe(&err) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("error: {err:#}");
             ExitCode::FAILURE
         }
     }
+}
+
+/// Whether the error comes from writing to a closed standard output.
+fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|e| {
+        e.downcast_ref::<std::io::Error>().is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
 }
 
 /// Logs to stderr at level `warn` (so warnings such as regions lost to the `.ms-seg` cap are seen);

@@ -295,3 +295,30 @@ fn interrupt_leaves_no_temporary_files_and_json_marks_complete_sets() {
         }
     }
 }
+
+#[test]
+fn nyu_grey_reads_the_inverted_rendering_with_the_kinect_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("nyu.7.pgm");
+    std::fs::write(&input, b"P5\n2 1\n255\n\x00\x64").unwrap();
+    let o = rangeseg(&["info".as_ref(), input.as_os_str(), "--nyu-grey".as_ref()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    assert!(
+        out.contains("400 − stored value") && out.contains("pinhole") && out.contains("300.0000"),
+        "{out}"
+    );
+    let o =
+        rangeseg(&["info".as_ref(), input.as_os_str(), "--nyu-grey".as_ref(), "--nyu-disparity".as_ref()]);
+    assert!(!o.status.success(), "--nyu-grey excludes --nyu-disparity");
+}
+
+#[test]
+fn a_closed_stdout_is_no_panic() {
+    // `rangeseg config | head -c 0`: the pipe's reader is gone before anything is written.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = Command::new(env!("CARGO_BIN_EXE_rangeseg")).arg("config").stdout(writer).output().unwrap();
+    let e = stderr_of(&o);
+    assert!(o.status.success() && !e.contains("panicked"), "{}: {e}", o.status);
+}

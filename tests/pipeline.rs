@@ -58,3 +58,34 @@ fn final_edges_are_the_final_segmentation_borders_or_the_relaxed_sets() {
     let out = rangeseg::pipeline::finish(&range, &camera, &relaxed, &out.features, &out.regions, &out.canny);
     assert_eq!(out.edges(), &out.relaxed.edges, "relaxed: C is C1 ∪ the supported relaxed C2");
 }
+
+/// One 3D plane seen by the ABW scanner, stored as the scanner stores it (8-bit steps), in a strip
+/// `w × h` of the image: a 1000 × 3 or 3 × 1000 strip used to come out as several regions, cut at
+/// the rows where the staircase made the clipped feature windows non-growable (issue 16).
+fn abw_plane_strip(w: u32, h: u32) -> rangeimage::RangeImage {
+    let cal = rangeimage::AbwCalibration::CAL0;
+    let (n, z0) = ([0.05f64, 0.02, 1.0], (255.0 - 120.0) / cal.scal);
+    let data = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (f64::from(x), f64::from(y))))
+        .map(|(x, y)| {
+            // The point of (x, y) is A + B·v (docs/method.md §2.1); solve n·(A + B·v) = n·(0, 0, z0).
+            let f = cal.f.abs();
+            let a = [(x - 255.0) * cal.offset / f, (255.0 - y) / cal.c * cal.offset / f, 255.0 / cal.scal];
+            let b = [(x - 255.0) / cal.scal / f, (255.0 - y) / cal.c / cal.scal / f, -1.0 / cal.scal];
+            let dot = |p: [f64; 3]| n[0] * p[0] + n[1] * p[1] + n[2] * p[2];
+            ((n[2] * z0 - dot(a)) / dot(b)).round().clamp(0.0, 255.0) as f32
+        })
+        .collect();
+    rangeimage::RangeImage::from_vec(w, h, data).unwrap()
+}
+
+#[test]
+fn a_thin_strip_of_one_plane_is_one_region() {
+    for (w, h) in [(1000, 3), (3, 1000), (512, 512)] {
+        let range = abw_plane_strip(w, h);
+        let out = rangeseg::segment(&range, &rangeimage::Camera::ABW0, &Config::default());
+        assert_eq!(out.regions.regions.len(), 1, "{w}×{h}: regions grown");
+        assert_eq!(out.fin.final_regions.len(), 1, "{w}×{h}: final regions");
+        assert!(out.fin.labels.as_slice().iter().all(|&l| l == 1), "{w}×{h}: every pixel in the plane");
+    }
+}

@@ -11,9 +11,8 @@ pub(crate) struct Args {
 }
 
 /// Runs `rangeseg config`.
-#[allow(clippy::print_stdout)]
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = if args.paper { rangeseg::Config::paper() } else { rangeseg::Config::default() };
-    print!("{}", config.to_toml());
+    std::io::Write::write_all(&mut std::io::stdout().lock(), config.to_toml().as_bytes())?;
     Ok(ExitCode::SUCCESS)
 }

@@ -22,6 +22,10 @@ pub(crate) struct ReadArgs {
     /// Samples are raw NYU/Kinect disparity: depth_m = 351.3 / (1092.5 − raw), 2047 = no data.
     #[arg(long)]
     pub(crate) nyu_disparity: bool,
+    /// Inputs are the 8-bit NYU frames of Jin et al. (grey renders depth, nearer = brighter): depth = 400 − grey,
+    /// Kinect intrinsics of their 564 × 427 crop (see docs/method.md §2.3). `--camera` still overrides the camera.
+    #[arg(long, conflicts_with_all = ["nyu_disparity", "depth_scale"])]
+    pub(crate) nyu_grey: bool,
     /// Refuse images of more pixels than this (width × height, read from the header before decoding).
     #[arg(long, value_name = "N", default_value_t = rangeio::DEFAULT_MAX_PIXELS)]
     pub(crate) max_pixels: u64,
@@ -30,13 +34,19 @@ pub(crate) struct ReadArgs {
 impl ReadArgs {
     /// The reader options these flags select.
     pub(crate) fn options(&self) -> ReadOptions {
-        ReadOptions {
+        let opts = ReadOptions {
             depth_scale: self.depth_scale,
             camera: self.camera,
             pgm_little_endian: self.pgm_little_endian,
             nyu_disparity_to_depth: self.nyu_disparity,
+            inverted_depth: None,
             max_pixels: self.max_pixels,
+        };
+        if !self.nyu_grey {
+            return opts;
         }
+        let nyu = opts.nyu_grey();
+        ReadOptions { camera: self.camera.or(nyu.camera), ..nyu }
     }
 }
 

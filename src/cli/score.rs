@@ -134,9 +134,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     if args.json {
         let report = Report { scores: &scores, seg_convention: convention, files: &files };
         let text = serde_json::to_string_pretty(&report).context("serialising the scores")?;
-        print_out(&text);
+        print_out(&text)?;
     } else {
-        print_out(&render_text(&scores, &files, convention, args.tolerance_px));
+        print_out(&render_text(&scores, &files, convention, args.tolerance_px))?;
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -212,9 +212,11 @@ fn compute(args: &Args) -> anyhow::Result<(eval::Scores, Files, eval::Convention
 }
 
 /// Writes the report to standard output.
-#[allow(clippy::print_stdout)]
-fn print_out(text: &str) {
-    println!("{text}");
+fn print_out(text: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}")?;
+    out.flush()
 }
 
 fn fmt_prf(p: &eval::Prf) -> String {

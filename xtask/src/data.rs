@@ -19,14 +19,17 @@ pub enum Role {
 pub struct DataSpec {
     /// The folder (`None`: the synthetic benchmark, generated on first use).
     pub dir: Option<PathBuf>,
-    /// The camera of every image; `None`: by ABW file name (calibration 0 or 1).
+    /// The camera of every image; `None`: by file name (ABW calibration 0 or 1, or [`rangeio::NYU_GREY`] for
+    /// `nyu.K`).
     pub camera: Option<Camera>,
+    /// `ReadOptions::inverted_depth` of every image (set with the camera by `--camera nyu-grey`).
+    pub inverted_depth: Option<f64>,
 }
 
 impl DataSpec {
     /// The synthetic ABW-like benchmark.
     pub fn synthetic() -> Self {
-        Self { dir: None, camera: None }
+        Self { dir: None, camera: None, inverted_depth: None }
     }
 
     /// The folder this spec reads, generating the synthetic benchmark if needed.
@@ -51,18 +54,23 @@ pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
                 specs.push(if v == "synthetic" {
                     DataSpec::synthetic()
                 } else {
-                    DataSpec { dir: Some(v.into()), camera: None }
+                    DataSpec { dir: Some(v.into()), camera: None, inverted_depth: None }
                 });
             }
             "--camera" => {
-                let v =
-                    it.next().context("--camera needs a value (abw0, abw1, grid, pinhole:fx,fy,cx,cy)")?;
-                let camera = rangeio::parse_camera(v).map_err(|e| anyhow::anyhow!("--camera {v}: {e}"))?;
+                let v = it
+                    .next()
+                    .context("--camera needs a value (abw0, abw1, grid, nyu-grey, pinhole:fx,fy,cx,cy)")?;
+                let (camera, inverted_depth) = if v == "nyu-grey" {
+                    (rangeio::NYU_GREY.camera, Some(rangeio::NYU_GREY.inverted_depth))
+                } else {
+                    (rangeio::parse_camera(v).map_err(|e| anyhow::anyhow!("--camera {v}: {e}"))?, None)
+                };
                 let last = specs.last_mut().context("--camera must follow the --data it applies to")?;
                 if last.camera.is_some() {
                     bail!("--camera given twice for one --data");
                 }
-                last.camera = Some(camera);
+                (last.camera, last.inverted_depth) = (Some(camera), inverted_depth);
             }
             _ => rest.push(a.clone()),
         }
@@ -83,6 +91,8 @@ pub struct LabelledImage {
     pub gt_ang: Option<PathBuf>,
     /// The camera to read it with.
     pub camera: Camera,
+    /// `ReadOptions::inverted_depth` to read it with.
+    pub inverted_depth: Option<f64>,
 }
 
 /// A labelled image read into memory.
@@ -102,7 +112,11 @@ impl LabelledImage {
     pub fn load(&self) -> Result<LoadedImage> {
         let frame = rangeio::read(
             &self.range,
-            &rangeio::ReadOptions { camera: Some(self.camera), ..Default::default() },
+            &rangeio::ReadOptions {
+                camera: Some(self.camera),
+                inverted_depth: self.inverted_depth,
+                ..Default::default()
+            },
         )?;
         let gt = rangeio::abw::read_labels(&self.gt_seg, true)?;
         if !gt.same_size(&frame.range) {
@@ -171,27 +185,34 @@ pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
                     gt_seg,
                     gt_ang: img.gt_ang.clone(),
                     camera: spec.camera.unwrap_or(img.camera),
+                    inverted_depth: spec.inverted_depth,
                 });
             }
             if split == Split::Train { "training split" } else { "test split" }
         }
         _ => {
-            images = every_labelled(&dir, spec.camera)?;
+            images = every_labelled(&dir, spec)?;
             "every labelled image"
         }
     };
     if images.is_empty() {
         bail!("{}: no labelled images (STEM.range with STEM.gt-seg)", dir.display());
     }
-    let camera = match spec.camera {
-        Some(c) => format!("{c:?}"),
-        None => "ABW calibration by file name".to_string(),
+    let camera = match (spec.camera, spec.inverted_depth) {
+        (Some(c), None) => format!("{c:?}"),
+        (Some(c), Some(o)) => format!("{c:?}, depth = {o} − stored value"),
+        (None, _) => "by file name (ABW calibration 0 or 1; nyu.K: nyu-grey)".to_string(),
     };
     Ok(DataSet { name, dir, selection, camera, images })
 }
 
+/// `nyu.K` (K a number): the name of the 8-bit NYU frames of Jin et al. (`../shared/data/nyu-planes`).
+fn is_nyu_grey_stem(stem: &str) -> bool {
+    stem.strip_prefix("nyu.").is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
+}
+
 /// Every `STEM.range` in `dir` with a `STEM.gt-seg` beside it, sorted by stem (numbers in natural order).
-fn every_labelled(dir: &Path, camera: Option<Camera>) -> Result<Vec<LabelledImage>> {
+fn every_labelled(dir: &Path, spec: &DataSpec) -> Result<Vec<LabelledImage>> {
     let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
     let mut images = Vec::new();
     for entry in entries {
@@ -202,14 +223,25 @@ fn every_labelled(dir: &Path, camera: Option<Camera>) -> Result<Vec<LabelledImag
         if !gt_seg.is_file() {
             continue;
         }
-        let camera = match camera.or_else(|| rangeio::abw::camera_for_path(&entry.path())) {
-            Some(c) => c,
-            None => {
+        let (camera, inverted_depth) = match (spec.camera, rangeio::abw::camera_for_path(&entry.path())) {
+            (Some(c), _) => (c, spec.inverted_depth),
+            (None, Some(c)) => (c, None),
+            (None, None) if is_nyu_grey_stem(stem) => {
+                (rangeio::NYU_GREY.camera, Some(rangeio::NYU_GREY.inverted_depth))
+            }
+            (None, None) => {
                 bail!("{}: no camera for this file name: pass --camera after --data", entry.path().display())
             }
         };
         let gt_ang = Some(dir.join(format!("{stem}.gt-ang"))).filter(|p| p.is_file());
-        images.push(LabelledImage { stem: stem.to_string(), range: entry.path(), gt_seg, gt_ang, camera });
+        images.push(LabelledImage {
+            stem: stem.to_string(),
+            range: entry.path(),
+            gt_seg,
+            gt_ang,
+            camera,
+            inverted_depth,
+        });
     }
     images.sort_by_key(|img| natural_key(&img.stem));
     Ok(images)
@@ -249,8 +281,14 @@ mod tests {
     fn camera_follows_its_data() {
         let (specs, rest) = parse_specs(&args("--data a --data b --camera grid --out o")).unwrap();
         assert_eq!(specs.len(), 2);
-        assert_eq!(specs[0], DataSpec { dir: Some("a".into()), camera: None });
-        assert_eq!(specs[1], DataSpec { dir: Some("b".into()), camera: Some(Camera::Grid) });
+        assert_eq!(specs[0], DataSpec { dir: Some("a".into()), camera: None, inverted_depth: None });
+        assert_eq!(
+            specs[1],
+            DataSpec { dir: Some("b".into()), camera: Some(Camera::Grid), inverted_depth: None }
+        );
+        let (specs, _) = parse_specs(&args("--data n --camera nyu-grey")).unwrap();
+        let nyu = rangeio::NYU_GREY;
+        assert_eq!((specs[0].camera, specs[0].inverted_depth), (Some(nyu.camera), Some(nyu.inverted_depth)));
         assert_eq!(rest, args("--out o"));
         assert_eq!(parse_specs(&args("--data synthetic")).unwrap().0, vec![DataSpec::synthetic()]);
     }
@@ -277,16 +315,39 @@ mod tests {
         rangeio::abw::write_range(&dir.join("k.7.range"), &range).unwrap();
         rangeio::abw::write_labels(&dir.join("k.7.gt-seg"), &LabelImage::new(4, 4, 10)).unwrap();
         rangeio::abw::write_range(&dir.join("unlabelled.range"), &range).unwrap();
-        let spec = DataSpec { dir: Some(dir.clone()), camera: None };
+        let spec = DataSpec { dir: Some(dir.clone()), camera: None, inverted_depth: None };
         let err = discover(Path::new("."), &spec, Role::Eval).unwrap_err();
         assert!(format!("{err:#}").contains("k.7.range: no camera"), "{err:#}");
-        let spec = DataSpec { dir: Some(dir.clone()), camera: Some(Camera::Grid) };
+        let spec = DataSpec { dir: Some(dir.clone()), camera: Some(Camera::Grid), inverted_depth: None };
         let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
         assert_eq!(set.images.len(), 1);
         assert_eq!(set.images[0].stem, "k.7");
         assert_eq!(set.selection, "every labelled image");
         let loaded = set.images[0].load().unwrap();
         assert_eq!(loaded.gt.dimensions(), (4, 4));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn nyu_names_read_as_the_inverted_grey_rendering() {
+        let dir = std::env::temp_dir().join(format!("xtask-data-nyu-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        rangeio::abw::write_range(&dir.join("nyu.15.range"), &rangeimage::RangeImage::new(4, 4, 100.0))
+            .unwrap();
+        rangeio::abw::write_labels(&dir.join("nyu.15.gt-seg"), &LabelImage::new(4, 4, 10)).unwrap();
+        let spec = DataSpec { dir: Some(dir.clone()), camera: None, inverted_depth: None };
+        let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
+        let nyu = rangeio::NYU_GREY;
+        assert_eq!(
+            (set.images[0].camera, set.images[0].inverted_depth),
+            (nyu.camera, Some(nyu.inverted_depth))
+        );
+        assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 300.0);
+        // An explicit camera wins, without the inversion.
+        let spec = DataSpec { camera: Some(Camera::Grid), ..spec };
+        let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
+        assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 100.0);
+        assert!(!is_nyu_grey_stem("nyu.") && !is_nyu_grey_stem("nyu.1a") && is_nyu_grey_stem("nyu.1436"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

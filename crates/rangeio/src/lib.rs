@@ -20,7 +20,8 @@
 //! camera is the pinhole), `ReadOptions::camera` replaces the camera. Stored 0 is always no data
 //! (NaN). NYU Depth v2 raw frames (PGM, little-endian 11-bit disparity) are read with
 //! `pgm_little_endian` and `nyu_disparity_to_depth`, which gives `depth_m = 351.3 / (1092.5 − raw)`
-//! with raw 2047 (and any raw ≥ 1092) as no data.
+//! with raw 2047 (and any raw ≥ 1092) as no data. Images that render depth nearer-is-brighter (the 8-bit NYU
+//! frames of Jin et al., see [`NYU_GREY`]) are read with `inverted_depth`: `depth = offset − stored value`.
 
 pub mod abw;
 mod error;
@@ -59,9 +60,19 @@ pub struct ReadOptions {
     /// Treat 16-bit samples as raw NYU/Kinect disparity: `depth_m = 351.3 / (1092.5 − raw)`,
     /// raw 2047 (or any raw ≥ 1092) = no data. Overrides `depth_scale`.
     pub nyu_disparity_to_depth: bool,
+    /// The stored values render depth inverted, nearer = brighter: the range value becomes `this − stored`
+    /// (in stored units; no data stays no data), applied after any scaling, to every format.
+    pub inverted_depth: Option<f64>,
     /// The largest width × height accepted, checked from the header before any pixel is decoded
     /// (default [`DEFAULT_MAX_PIXELS`]).
     pub max_pixels: u64,
+}
+
+impl ReadOptions {
+    /// These options for the 8-bit NYU frames of Jin et al.: [`NYU_GREY`]'s camera and inverted depth.
+    pub fn nyu_grey(self) -> Self {
+        Self { camera: Some(NYU_GREY.camera), inverted_depth: Some(NYU_GREY.inverted_depth), ..self }
+    }
 }
 
 impl Default for ReadOptions {
@@ -71,6 +82,7 @@ impl Default for ReadOptions {
             camera: None,
             pgm_little_endian: false,
             nyu_disparity_to_depth: false,
+            inverted_depth: None,
             max_pixels: DEFAULT_MAX_PIXELS,
         }
     }
@@ -125,6 +137,11 @@ pub enum Units {
     NyuDisparity,
     /// The stored sample value, unscaled (units unknown: disparity, raw depth …).
     Raw,
+    /// `offset − stored value`: depth in stored units from an inverted rendering (see `inverted_depth`).
+    Inverted {
+        /// The stored value of depth 0.
+        offset: f64,
+    },
 }
 
 impl fmt::Display for Units {
@@ -135,6 +152,7 @@ impl fmt::Display for Units {
             Units::Metres { metres_per_unit } => write!(f, "m (stored value × {metres_per_unit})"),
             Units::NyuDisparity => f.write_str("m (from nyu disparity: 351.3 / (1092.5 − raw))"),
             Units::Raw => f.write_str("raw sample value"),
+            Units::Inverted { offset } => write!(f, "{offset} − stored value (inverted rendering of depth)"),
         }
     }
 }
@@ -235,6 +253,11 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
     } else {
         return Err(ReadError::UnknownFormat { path: path.to_path_buf() });
     };
+    if let Some(offset) = opts.inverted_depth {
+        frame.range =
+            frame.range.map(|&v| if v.is_finite() { (offset - f64::from(v)) as f32 } else { f32::NAN });
+        frame.units = Units::Inverted { offset };
+    }
     if let Some(camera) = opts.camera {
         frame.camera = camera;
     }
@@ -245,7 +268,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
 fn sensor_frame(range: RangeImage, format: Format, units: Units, bits: u8) -> Frame {
     let camera = match units {
         Units::Metres { .. } | Units::NyuDisparity => default_pinhole(range.width(), range.height()),
-        Units::AbwRaw | Units::Raw => Camera::Grid,
+        Units::AbwRaw | Units::Raw | Units::Inverted { .. } => Camera::Grid,
     };
     Frame { range, camera, format, units, bits_per_sample: bits }
 }
@@ -279,6 +302,27 @@ fn scale_samples(samples: &Grid<u16>, opts: &ReadOptions, default: Option<f64>) 
 /// Depth in metres of a raw NYU/Kinect disparity sample; NaN for 0, 2047 and raw ≥ 1092.
 pub fn nyu_disparity_to_depth(raw: u16) -> f32 {
     if raw == 0 || raw >= 1092 { f32::NAN } else { (351.3 / (1092.5 - f64::from(raw))) as f32 }
+}
+
+/// How to read the 8-bit NYU Depth v2 frames that Jin et al. (2017) published with per-plane ground truth
+/// (`rawDepth_K.bmp`, 564 × 427): the grey value renders depth nearer-is-brighter, close to linear in depth
+/// (a plane's depth is the inverse of an affine function of the pixel, and `offset − grey` is that depth up to
+/// scale: robust plane fits over the 151 GT planes of 20 frames leave a median 3.9 grey levels for offsets 350–500,
+/// against 4.7 for the grey value itself and up to 10 on receding floors and ceilings), seen through the Kinect's
+/// colour-camera intrinsics (fx 518.86, fy 519.47, principal point 325.58, 253.74 in the 640 × 480 frame) shifted
+/// by the crop (38 columns, 44 rows). The scale of depth is unknown and does not matter to a plane.
+pub const NYU_GREY: NyuGrey = NyuGrey {
+    camera: Camera::Pinhole { fx: 518.86, fy: 519.47, cx: 287.58, cy: 209.74, depth_scale: 1.0 },
+    inverted_depth: 400.0,
+};
+
+/// A camera together with the inverted-depth offset its images need (see [`NYU_GREY`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NyuGrey {
+    /// The camera of the frames.
+    pub camera: Camera,
+    /// [`ReadOptions::inverted_depth`] for the frames.
+    pub inverted_depth: f64,
 }
 
 /// Parses a camera spec: `abw0`, `abw1`, `pinhole:fx,fy,cx,cy[,depth_scale]` or `grid`.
@@ -426,6 +470,20 @@ mod tests {
             parse_camera("pinhole: 500, 501, 320, 240, 0.001"),
             Ok(Camera::Pinhole { fx: 500.0, fy: 501.0, cx: 320.0, cy: 240.0, depth_scale: 0.001 })
         );
+    }
+
+    #[test]
+    fn inverted_depth_maps_every_format_and_keeps_no_data() {
+        // An 8-bit PGM: 0 is no data, 100 and 250 become 300 and 150.
+        let pgm = b"P5\n3 1\n255\n\x00\x64\xfa";
+        let path = Path::new("x.pgm");
+        let f = read_bytes(pgm, path, &ReadOptions::default().nyu_grey()).unwrap();
+        assert!(f.range[(0, 0)].is_nan());
+        assert_eq!((f.range[(1, 0)], f.range[(2, 0)]), (300.0, 150.0));
+        assert_eq!(f.units, Units::Inverted { offset: 400.0 });
+        assert_eq!(f.camera, NYU_GREY.camera);
+        let plain = read_bytes(pgm, path, &ReadOptions::default()).unwrap();
+        assert_eq!((plain.range[(1, 0)], plain.camera), (100.0, Camera::Grid));
     }
 
     #[test]

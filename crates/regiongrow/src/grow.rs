@@ -482,6 +482,12 @@ pub(crate) fn run(
 
     if params.fill_unlabelled {
         info.n_filled_px = fill(&ctx, params, &stats, &used, &mut labels, &mut queue);
+        if params.merge_after_fill && info.n_filled_px > 0 {
+            // Regions that a band of non-growable pixels kept apart touch now: merge again.
+            let again = merge(&mut labels, next - 1, pw, ctx.eight, &ctx.geo, &ctx.k, params, &toward);
+            info.n_merged += again.n_merged;
+            info.n_merge_passes += again.n_passes;
+        }
     }
 
     // Final statistics under the current labels, then relabel 1..n in raster order of first

@@ -29,7 +29,9 @@
 //!    camera at the pixel's range value.
 //! 3. **Merge**: adjacent regions with `|mean K₁ − mean K₂| < t_m` (default mode: and normals within
 //!    `merge_max_angle_deg`, and the RMS distance of each region's points to the other's plane
-//!    ≤ `merge_max_residual`) are merged by a deterministic fixpoint over the region adjacency
+//!    ≤ `merge_max_residual`; or, whatever their normals and mean K, the one plane fitted to both
+//!    has an RMS distance ≤ `merge_max_residual` and ≤ `merge_joint_rms_ratio` × the pixel-weighted
+//!    RMS of their own fits) are merged by a deterministic fixpoint over the region adjacency
 //!    graph. Each pass sorts the candidate pairs by a dissimilarity score, ties broken by the
 //!    regions' first pixel in raster order (never by label value, so relabelling the input does
 //!    not change the result), and merges with union–find, re-checking each pair on the merged
@@ -37,7 +39,8 @@
 //! 4. Regions under `min_region_px` become 0. Optionally (`fill_unlabelled`) the left-over
 //!    valid pixels (crease bands, dropped fragments) are given, by a breadth-first flood from the
 //!    regions' borders, to the 4-adjacent region whose plane is nearest, if that distance is
-//!    ≤ `fill_max_residual`. Labels are renumbered 1..n in raster order of first pixel.
+//!    ≤ `fill_max_residual`; then (`merge_after_fill`) the merge runs again, since regions that a band
+//!    of non-growable pixels kept apart (crease bands, staircase steps) now touch. Labels are renumbered 1..n in raster order of first pixel.
 //! 5. **C1** = [`borders`] of the final labels.
 //!
 //! The stage is single-threaded and fully deterministic for a given input, params and seed.
@@ -106,6 +109,11 @@ pub struct Params {
     /// Default mode: adjacent regions merge only if each one's RMS distance to the other's plane
     /// is ≤ this, in camera units.
     pub merge_max_residual: f32,
+    /// Default mode: adjacent regions also merge, whatever their normals and mean K, when the one
+    /// plane fitted to both has an RMS distance ≤ `merge_max_residual` and ≤ this × the larger of
+    /// their own RMS distances (0 = off). Thin regions (stripes, strips of a staircase) have normals
+    /// the angle test cannot trust; the joint fit can.
+    pub merge_joint_rms_ratio: f32,
     /// Regions with fewer pixels become unlabelled (0).
     pub min_region_px: u32,
     /// Neighbourhood of growth and of the region adjacency graph: 4 or 8.
@@ -114,6 +122,9 @@ pub struct Params {
     pub fill_unlabelled: bool,
     /// Maximum plane distance for `fill_unlabelled`, in camera units.
     pub fill_max_residual: f32,
+    /// After the fill step, merge again: regions that a band of non-growable pixels (a crease
+    /// band, a staircase step, a stripe) kept apart are adjacent now.
+    pub merge_after_fill: bool,
     /// C1 one pixel thick (one side of each border) instead of both sides.
     pub c1_one_sided: bool,
     /// Seed candidates are drawn from every `seed_stride_px`-th pixel in x and y (1 = all pixels).
@@ -142,10 +153,12 @@ impl Default for Params {
             refit_every_px: 16,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 2.0,
+            merge_joint_rms_ratio: 1.2,
             min_region_px: 200,
             connectivity: 4,
             fill_unlabelled: true,
             fill_max_residual: 3.0,
+            merge_after_fill: true,
             c1_one_sided: false,
             seed_stride_px: 1,
             seed_radius_px: 1,
@@ -178,6 +191,7 @@ impl Params {
             ("max_residual", self.max_residual),
             ("residual_rms_ratio", self.residual_rms_ratio),
             ("merge_max_residual", self.merge_max_residual),
+            ("merge_joint_rms_ratio", self.merge_joint_rms_ratio),
             ("fill_max_residual", self.fill_max_residual),
         ];
         for (name, v) in nonneg {

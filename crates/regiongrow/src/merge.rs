@@ -111,6 +111,7 @@ struct Criterion {
     cos_angle: f64,
     max_angle_deg: f64,
     max_residual: f64,
+    joint_ratio: f64,
 }
 
 impl Criterion {
@@ -121,11 +122,29 @@ impl Criterion {
             cos_angle: f64::from(params.merge_max_angle_deg).to_radians().cos(),
             max_angle_deg: f64::from(params.merge_max_angle_deg),
             max_residual: f64::from(params.merge_max_residual),
+            joint_ratio: f64::from(params.merge_joint_rms_ratio),
         }
     }
 
     /// Dissimilarity score (< 1-ish, smaller = more similar) if the two regions may merge.
     fn score(&self, a: &Stats, pa: Option<&Plane>, b: &Stats, pb: Option<&Plane>) -> Option<f64> {
+        self.pairwise(a, pa, b, pb).or_else(|| self.joint(a, pa, b, pb))
+    }
+
+    /// The joint-fit test (`merge_joint_rms_ratio`): the score is the joint RMS over its limit.
+    fn joint(&self, a: &Stats, pa: Option<&Plane>, b: &Stats, pb: Option<&Plane>) -> Option<f64> {
+        if self.paper || self.joint_ratio <= 0.0 {
+            return None;
+        }
+        let (pa, pb) = (pa?, pb?);
+        let own = ((a.mom.n * pa.mean_sq + b.mom.n * pb.mean_sq) / (a.mom.n + b.mom.n)).max(0.0).sqrt();
+        let limit = self.max_residual.min(self.joint_ratio * own);
+        let rms = a.mom.combined(&b.mom).fit(|_| pa.normal)?.mean_sq.max(0.0).sqrt();
+        (rms <= limit && limit > 0.0).then(|| 1.0 + rms / limit)
+    }
+
+    /// The pairwise test: mean K, normals and each region's points against the other's plane.
+    fn pairwise(&self, a: &Stats, pa: Option<&Plane>, b: &Stats, pb: Option<&Plane>) -> Option<f64> {
         let dk = (a.mean_k() - b.mean_k()).abs();
         if dk.is_nan() || dk >= self.t_m {
             return None;
@@ -433,5 +452,42 @@ mod tests {
                 assert_eq!(s.mom, r.mom);
             }
         }
+    }
+
+    /// The statistics of the pixels `x in xs, y in ys` of the surface `z(x, y)` rounded to whole units.
+    fn strip(xs: std::ops::Range<i32>, ys: std::ops::Range<i32>, z: impl Fn(f64, f64) -> f64) -> Stats {
+        let mut s = Stats { first: 0, ..Stats::default() };
+        for y in ys {
+            for x in xs.clone() {
+                let (x, y) = (f64::from(x), f64::from(y));
+                s.mom.add([x, y, z(x, y).round()]);
+                s.count += 1;
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn joint_fit_merges_thin_strips_of_one_plane_and_not_of_two() {
+        let params = Params::default();
+        let crit = Criterion::new(&params);
+        let fit = |s: &Stats| s.mom.fit(|_| [0.0, 0.0, 1.0]);
+        let plane = |x: f64, y: f64| 0.31 * x + 0.07 * y;
+        // Two 3-pixel-wide strips of one plane, one above the other, whose mean K (noise of the
+        // staircase in the curvature) differ beyond `t_m`: the pairwise test refuses them, the joint fit,
+        // as good as each strip's own, merges them.
+        let (mut a, mut b) = (strip(0..3, 0..150, plane), strip(0..3, 150..300, plane));
+        (a.n_k, a.sum_k, b.n_k, b.sum_k) = (a.count, 0.0, b.count, 2.0 * crit.t_m * f64::from(b.count));
+        let (pa, pb) = (fit(&a).unwrap(), fit(&b).unwrap());
+        assert!(crit.pairwise(&a, Some(&pa), &b, Some(&pb)).is_none());
+        assert!(crit.score(&a, Some(&pa), &b, Some(&pb)).is_some(), "one plane: merged by the joint fit");
+        // The same strips on two planes 3° apart along the strip: the joint fit is much worse than each.
+        let bent = |x: f64, y: f64| plane(x, y) + (y - 150.0).max(0.0) * 3f64.to_radians().tan();
+        let c = strip(0..3, 150..300, bent);
+        let pc = fit(&c).unwrap();
+        assert!(crit.joint(&a, Some(&pa), &c, Some(&pc)).is_none(), "two planes: kept apart");
+        // Off when the ratio is 0.
+        let off = Criterion::new(&Params { merge_joint_rms_ratio: 0.0, ..Params::default() });
+        assert!(off.joint(&a, Some(&pa), &b, Some(&pb)).is_none());
     }
 }

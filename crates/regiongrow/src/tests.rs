@@ -81,7 +81,14 @@ fn bent_surface() -> crate::testutil::Scene {
 fn residual_limit_follows_the_region_scatter() {
     let s = bent_surface();
     let run = |ratio: f32| {
-        let params = Params { min_region_px: 20, residual_rms_ratio: ratio, ..Params::default() };
+        // Growth alone: the joint-fit merge and the merge after fill would rejoin fragments.
+        let params = Params {
+            min_region_px: 20,
+            residual_rms_ratio: ratio,
+            merge_joint_rms_ratio: 0.0,
+            merge_after_fill: false,
+            ..Params::default()
+        };
         let (seg, info) = grow(&s.range, &s.features, &Camera::Grid, &params, 3);
         let mut counts = vec![0u32; info.n_regions as usize + 1];
         for &l in seg.labels.as_slice() {
@@ -482,12 +489,12 @@ fn outputs_are_pinned_on_six_setups() {
         })
         .collect();
     let want: [(&str, u64); 6] = [
-        ("default abw0", 0x3f4b79f4138a537c),
-        ("default 8-conn one-sided abw1", 0xd0aaa9ef2af94282),
+        ("default abw0", 0xa25f0e51e3a12bf7),
+        ("default 8-conn one-sided abw1", 0x6fb17621347f35b1),
         ("paper abw0", 0xeaf9c43cecf4acd8),
-        ("default quantised strided relaxed", 0x2ac4a55aa6e1b16),
-        ("default quantised", 0x44386b744fb5a9b9),
-        ("pinhole and grid", 0xdb763acae3cfd615),
+        ("default quantised strided relaxed", 0x822f472f11ae1746),
+        ("default quantised", 0x0e53c6b0dd92c8f1),
+        ("pinhole and grid", 0xb0a8e731ccee456b),
     ];
     assert_eq!(got, want, "outputs changed:\n{got:#x?}");
 }

@@ -61,6 +61,10 @@ pub struct SegmentParams {
     /// dropped is not swallowed by its neighbour (which would make that neighbour an
     /// under-segmentation of both).
     pub fill_max_residual: f64,
+    /// With `fill_max_residual` > 0, the limit of a region is the larger of `fill_max_residual` and this
+    /// multiple of the RMS distance of its core points to its plane (0 = `fill_max_residual` alone): a surface
+    /// a plane fits only roughly (8-bit staircases, depth encodings that bend planes) keeps its pixels.
+    pub fill_rms_ratio: f64,
 }
 
 impl Default for SegmentParams {
@@ -75,7 +79,8 @@ impl Default for SegmentParams {
             within_max_rms_ratio: 1.5,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 2.0,
-            fill_max_residual: 0.0,
+            fill_max_residual: 3.0,
+            fill_rms_ratio: 3.0,
         }
     }
 }
@@ -105,6 +110,12 @@ impl SegmentParams {
             return Err(format!(
                 "segment.merge_max_angle_deg must be in 0..=90, got {}",
                 self.merge_max_angle_deg
+            ));
+        }
+        if !(self.fill_rms_ratio.is_finite() && self.fill_rms_ratio >= 0.0) {
+            return Err(format!(
+                "segment.fill_rms_ratio must be finite and ≥ 0, got {}",
+                self.fill_rms_ratio
             ));
         }
         if !(self.fill_max_residual.is_finite() && self.fill_max_residual >= 0.0) {
@@ -369,7 +380,7 @@ pub fn final_segmentation(
         for &(x, y) in &ring {
             let (x, y) = (x as usize, y as usize);
             let p = point(x, y).expect("ring pixels are valid");
-            let mut best: Option<(f64, u32)> = None;
+            let mut best: Option<(f64, u32, f64)> = None;
             let mut last = 0u32;
             for_neighbours(x, y, w, h, |j, _, _| {
                 let l = comp[j];
@@ -379,13 +390,13 @@ pub fn final_segmentation(
                 last = l;
                 let plane = planes[l as usize - 1].as_ref().expect("labelled pixels belong to kept regions");
                 let res = plane.residual(p);
-                if best.is_none_or(|(br, bl)| res < br || (res == br && l < bl)) {
-                    best = Some((res, l));
+                if best.is_none_or(|(br, bl, _)| res < br || (res == br && l < bl)) {
+                    best = Some((res, l, fill_limit.max(params.fill_rms_ratio * plane.rms)));
                 }
             });
-            let (res, l) = best.expect("ring pixels touch a region");
+            let (res, l, limit) = best.expect("ring pixels touch a region");
             // A pixel too far from every adjacent plane stays 0 (and grows no further ring).
-            assign.push(if fill_limit > 0.0 && res > fill_limit { 0 } else { l });
+            assign.push(if fill_limit > 0.0 && res > limit { 0 } else { l });
         }
         for (&(x, y), &l) in ring.iter().zip(&assign) {
             comp[y as usize * w + x as usize] = l;
@@ -721,6 +732,32 @@ mod tests {
             assert_eq!(regions.len(), 1);
             assert_eq!(labels[(6, 6)], want, "limit {limit}");
             assert_eq!(labels[(20, 20)], 1);
+        }
+    }
+
+    /// `fill_rms_ratio`: a rough plane (a ±2-unit checker ripple, RMS 2) keeps a pixel 4 units off it that the
+    /// absolute limit of 3 alone would leave unlabelled; a pixel 20 units off stays 0 either way.
+    #[test]
+    fn fill_limit_follows_the_region_scatter() {
+        let hole = |x: u32, y: u32| (5..7).contains(&x) && (5..7).contains(&y);
+        let far = |x: u32, y: u32| (30..32).contains(&x) && (20..22).contains(&y);
+        let range = Grid::from_fn(40, 30, |x, y| {
+            let ripple = if (x + y) % 2 == 0 { 2.0 } else { -2.0 };
+            if hole(x, y) {
+                104.0
+            } else if far(x, y) {
+                120.0
+            } else {
+                100.0 + ripple
+            }
+        });
+        let edges = Grid::from_fn(40, 30, |x, y| hole(x, y) || far(x, y));
+        let base = SegmentParams { min_region_px: 10, fill_max_residual: 3.0, ..SegmentParams::default() };
+        for (ratio, want) in [(0.0, 0u32), (3.0, 1)] {
+            let p = SegmentParams { fill_rms_ratio: ratio, ..base.clone() };
+            let (labels, _) = final_segmentation(&range, &Camera::Grid, &edges, None, &p);
+            assert_eq!(labels[(5, 5)], want, "ratio {ratio}");
+            assert_eq!(labels[(30, 20)], 0, "ratio {ratio}");
         }
     }
 
