@@ -75,18 +75,20 @@ fn prepare(index: u32, use_k: bool) -> Prepared {
     }
 }
 
-fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams, seg_supported: bool) -> Row {
-    let (r, info) = relax::relax(&p.c1, &p.s1, &p.c2, &p.magnitude, &p.valid, params, 0);
+fn evaluate(p: &Prepared, params: &relax::Params, sp: &finalseg::Params, seg_supported: bool) -> Row {
+    let (r, info) = relax::relax(
+        &relax::Input { c1: &p.c1, s1: &p.s1, c2: &p.c2, magnitude: &p.magnitude, valid: &p.valid },
+        params,
+        0,
+    );
     let seg_edges = if seg_supported { r.edges.clone() } else { r.union() };
-    let (labels, regions) =
-        relax::final_segmentation(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), sp);
+    let (labels, regions) = finalseg::segment(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), sp);
     let other_mode = match sp.mode {
-        relax::SegmentMode::Regions => relax::SegmentMode::Components,
-        relax::SegmentMode::Components => relax::SegmentMode::Regions,
+        finalseg::Mode::Regions => finalseg::Mode::Components,
+        finalseg::Mode::Components => finalseg::Mode::Regions,
     };
-    let sp_other = relax::SegmentParams { mode: other_mode, ..sp.clone() };
-    let (labels_other, _) =
-        relax::final_segmentation(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), &sp_other);
+    let sp_other = finalseg::Params { mode: other_mode, ..sp.clone() };
+    let (labels_other, _) = finalseg::segment(&p.range, &p.camera, &seg_edges, Some(&p.rg_labels), &sp_other);
     let f = |e: &EdgeMap| eval::boundary::matched(e, &p.gt, 2.0).f;
     let pp = |e: &EdgeMap| eval::paper_precision(e, &p.c1, 2.0).unwrap_or(f64::NAN);
     let nz = eval::Convention::NonZero;
@@ -94,7 +96,7 @@ fn evaluate(p: &Prepared, params: &relax::Params, sp: &relax::SegmentParams, seg
     let h_final = eval::hoover::compare_with(&p.gt, &labels, 0.8, None, None, nz);
     let h_other = eval::hoover::compare_with(&p.gt, &labels_other, 0.8, None, None, nz);
     let (h_comp, h_reg) =
-        if sp.mode == relax::SegmentMode::Regions { (&h_other, &h_final) } else { (&h_final, &h_other) };
+        if sp.mode == finalseg::Mode::Regions { (&h_other, &h_final) } else { (&h_final, &h_other) };
     let cou = |h: &eval::hoover::HooverScore| [h.correct, h.over, h.under];
     Row {
         f_c1: f(&p.c1),
@@ -120,7 +122,7 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 fn main() -> Result<()> {
     let mut params = relax::Params::default();
-    let mut sp = relax::SegmentParams::default();
+    let mut sp = finalseg::Params::default();
     let (mut tune, mut use_k, mut seg_supported) = (false, false, false);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -136,8 +138,8 @@ fn main() -> Result<()> {
             "--min-region" => sp.min_region_px = value("--min-region")?.parse()?,
             "--mode" => {
                 sp.mode = match value("--mode")?.as_str() {
-                    "components" => relax::SegmentMode::Components,
-                    "regions" => relax::SegmentMode::Regions,
+                    "components" => finalseg::Mode::Components,
+                    "regions" => finalseg::Mode::Regions,
                     m => bail!("unknown mode {m}"),
                 }
             }
@@ -152,8 +154,8 @@ fn main() -> Result<()> {
             _ => bail!("unknown argument {a}"),
         }
     }
-    params.validate().map_err(anyhow::Error::msg)?;
-    sp.validate().map_err(anyhow::Error::msg)?;
+    params.validate()?;
+    sp.validate()?;
     let only: Option<u32> = match std::env::var("ONLY") {
         Ok(v) => Some(v.parse().with_context(|| format!("ONLY={v:?}: not an image index"))?),
         Err(_) => None,

@@ -129,7 +129,7 @@ fn main() -> anyhow::Result<()> {
     } else {
         {
             let c = rangeseg::Config::default();
-            (c.raw_canny, c.vcanny)
+            (c.raw_canny.detector(), c.vcanny)
         }
     };
     let imgs = match split.as_str() {

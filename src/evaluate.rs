@@ -7,14 +7,8 @@ use eval::jin::JinScore;
 use rangeimage::{EdgeMap, LabelImage, Region};
 use serde::Serialize;
 
-/// Edge tolerance of the boundary and paper-precision metrics, in pixels.
-pub const TOLERANCE_PX: f64 = 2.0;
-/// Hoover tolerance of the main table.
-pub const HOOVER_T: f64 = 0.8;
-/// Hoover tolerances of the correct-detection curve.
-pub fn hoover_curve_ts() -> Vec<f64> {
-    (0..=22).map(|i| 0.51 + 0.02 * f64::from(i)).collect()
-}
+pub use eval::hoover::CURVE_TS;
+pub use eval::{HOOVER_T, TOLERANCE_PX};
 
 /// Scores of one edge map.
 #[derive(Debug, Clone, Serialize)]
@@ -50,9 +44,9 @@ pub struct ImageScores {
     pub jin_regiongrow: JinScore,
     /// Jin et al.'s one-sided detection rule for the final segmentation.
     pub jin_final: JinScore,
-    /// Correct detections of the final segmentation over `hoover_curve_ts()`.
+    /// Correct detections of the final segmentation over [`CURVE_TS`].
     pub curve_correct: Vec<u32>,
-    /// Correct detections of region growing alone over `hoover_curve_ts()`.
+    /// Correct detections of region growing alone over [`CURVE_TS`].
     pub curve_correct_regiongrow: Vec<u32>,
 }
 
@@ -82,8 +76,7 @@ pub fn score_image(
 ) -> ImageScores {
     let _s = tracing::info_span!("score_image").entered();
     let c1 = &out.regions.c1;
-    let ts = hoover_curve_ts();
-    let correct = |labels| eval::hoover::curve(gt, labels, &ts).iter().map(|s| s.correct).collect();
+    let correct = |labels| eval::hoover::curve(gt, labels, &CURVE_TS).iter().map(|s| s.correct).collect();
     ImageScores {
         raw_canny: score_edges(raw_canny, c1, gt),
         c2: score_edges(&out.canny.edges, c1, gt),

@@ -8,8 +8,8 @@ pub mod output;
 pub mod pipeline;
 pub mod planes;
 
-pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams};
+pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams, RawCannyParams};
 pub use output::write_outputs;
 pub use pipeline::{Output, segment};
 pub use planes::{Plane, planes};
-pub use {eval, features, isa, rangeimage, rangeio, regiongrow, relax, vcanny};
+pub use {eval, features, finalseg, isa, rangeimage, rangeio, regiongrow, relax, vcanny};

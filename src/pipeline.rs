@@ -3,6 +3,7 @@
 use crate::config::{C1Strength, Config, FinalEdges};
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 use serde::Serialize;
+use std::path::Path;
 use std::time::Instant;
 
 /// Wall-clock time spent in each stage, in milliseconds.
@@ -61,9 +62,21 @@ fn elapsed_ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// Panics with the configuration error if `config` is invalid: the facade's entry points check the
+/// parameters once here, the stages only in debug builds.
+fn check(config: &Config, entry: &str) {
+    if let Err(e) = config.validate(Path::new("configuration")) {
+        panic!("rangeseg::{entry}: {e}");
+    }
+}
+
 /// Runs the whole method on one range image.
+///
+/// # Panics
+/// If `config` is invalid ([`Config::validate`]; [`Config::load`] returns only valid ones).
 pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
     let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
+    check(config, "segment");
     let t = Instant::now();
     let features = features::compute(range, &config.features);
     let t_features = elapsed_ms(t);
@@ -87,6 +100,9 @@ pub fn segment(range: &RangeImage, camera: &Camera, config: &Config) -> Output {
 }
 
 /// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
+///
+/// # Panics
+/// If `config` is invalid ([`Config::validate`]).
 pub fn finish(
     range: &RangeImage,
     camera: &Camera,
@@ -95,10 +111,18 @@ pub fn finish(
     regions: &regiongrow::Segmentation,
     canny: &vcanny::Edges,
 ) -> Finish {
+    check(config, "finish");
     let valid = rangeimage::valid_mask(range);
     let s1 = c1_strength(features, config.pipeline.c1_strength);
     let (relaxed, relax_info) = if config.pipeline.relax {
-        relax::relax(&regions.c1, &s1, &canny.edges, &canny.magnitude, &valid, &config.relax, config.seed)
+        let input = relax::Input {
+            c1: &regions.c1,
+            s1: &s1,
+            c2: &canny.edges,
+            magnitude: &canny.magnitude,
+            valid: &valid,
+        };
+        relax::relax(&input, &config.relax, config.seed)
     } else {
         let edges = relax::union(&regions.c1, &canny.edges);
         let relaxed = relax::Relaxed { c1: regions.c1.clone(), c2: canny.edges.clone(), edges };
@@ -107,12 +131,12 @@ pub fn finish(
     // The segmentation sees both relaxed sets in full (before the support test): a border between
     // two faces that region growing merged has only C2 to show it.
     let (labels, final_regions) =
-        relax::final_segmentation(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
+        finalseg::segment(range, camera, &relaxed.union(), Some(&regions.labels), &config.segment);
     let edges = match config.pipeline.final_edges {
         FinalEdges::Relaxed => relaxed.edges.clone(),
         // The boundary rule eval scores segmentations by: region pixels next to another region, and
         // unlabelled pixels between two regions; a region's edge against unlabelled pixels is no border.
-        FinalEdges::Segmentation => eval::boundary::label_boundaries(&labels, |l| l != 0),
+        FinalEdges::Segmentation => rangeimage::boundary::label_boundaries(&labels, |l| l != 0),
     };
     Finish { relaxed, relax_info, labels, final_regions, edges }
 }

@@ -13,6 +13,6 @@ pub(crate) struct Args {
 /// Runs `rangeseg config`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = if args.paper { rangeseg::Config::paper() } else { rangeseg::Config::default() };
-    std::io::Write::write_all(&mut std::io::stdout().lock(), config.to_toml().as_bytes())?;
+    std::io::Write::write_all(&mut std::io::stdout().lock(), config.to_commented_toml().as_bytes())?;
     Ok(ExitCode::SUCCESS)
 }

@@ -29,7 +29,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     super::prepare_out_file(&args.output)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let edges = if args.raw {
-        vcanny::detect_raw(&frame.range, &cfg.raw_canny)
+        vcanny::detect_raw(&frame.range, &cfg.raw_canny.detector())
     } else {
         let plane = features::fit_planes(&frame.range, cfg.features.window_px);
         let valid = rangeimage::valid_mask(&frame.range);

@@ -47,10 +47,10 @@ pub(crate) struct Args {
     #[arg(long, value_name = "REF.png")]
     reference: Option<PathBuf>,
     /// Edge matching tolerance in pixels (Euclidean, inclusive), at most the image diagonal.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = eval::TOLERANCE_PX)]
     tolerance_px: f64,
     /// Hoover tolerance T, in (0.5, 1].
-    #[arg(long, default_value_t = 0.8)]
+    #[arg(long, default_value_t = eval::HOOVER_T)]
     hoover_t: f64,
     /// Which labels of the segmentation are regions.
     #[arg(long, value_enum, default_value_t = SegConvention::Auto)]
@@ -301,8 +301,8 @@ mod tests {
             gt_ang: None,
             seg_nor: None,
             reference: None,
-            tolerance_px: 2.0,
-            hoover_t: 0.8,
+            tolerance_px: eval::TOLERANCE_PX,
+            hoover_t: eval::HOOVER_T,
             seg_convention: SegConvention::Auto,
             curve: false,
             json: true,

@@ -103,7 +103,7 @@ fn evaluate_one(img: &LabelledImage, config: &Config, out_dir: &Path, fig_dir: &
     let total_ms = t_total.elapsed().as_secs_f64() * 1e3 + read_ms;
 
     // The raw-depth baseline of Table I is not part of the pipeline, so it is outside the timings.
-    let raw = vcanny::detect_raw(&frame.range, &config.raw_canny);
+    let raw = vcanny::detect_raw(&frame.range, &config.raw_canny.detector());
 
     let scores = rangeseg::evaluate::score_image(&out, &raw.edges, &gt, &angles);
     let figure = report::figure(&frame.range, &gt, &out);

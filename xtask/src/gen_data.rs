@@ -9,6 +9,7 @@
 // A command-line tool: printing its results is its job.
 #![allow(clippy::print_stdout)]
 
+use crate::report::mean_std;
 use anyhow::{Context, Result, bail};
 use rangeio::abw::{AdjacentAngle, raw_to_range, write_angles, write_labels, write_range};
 use rayon::prelude::*;
@@ -173,14 +174,6 @@ pub fn ensure_synthetic_data(root: &Path) -> Result<PathBuf> {
     Ok(dir)
 }
 
-/// Mean and (population) standard deviation, summed in order.
-fn mean_std(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len().max(1) as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
-    (mean, var.sqrt())
-}
-
 fn print_stats(scenes: &[(ImageId, Scene)]) {
     for test in [false, true] {
         let split: Vec<&Scene> = scenes.iter().filter(|(id, _)| id.test == test).map(|(_, s)| s).collect();
@@ -196,9 +189,9 @@ fn print_stats(scenes: &[(ImageId, Scene)]) {
             .iter()
             .map(|s| s.labels.as_slice().iter().filter(|&&l| l != 0).count() as f64 / s.labels.len() as f64)
             .collect();
-        let (rm, rs) = mean_std(&regions);
-        let (vm, vs) = mean_std(&valid);
-        let (lm, _) = mean_std(&labelled);
+        let (rm, rs) = mean_std(regions.iter().copied());
+        let (vm, vs) = mean_std(valid.iter().copied());
+        let (lm, _) = mean_std(labelled.iter().copied());
         let lo = regions.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = regions.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         println!(

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use base64::Engine as _;
 use rangeimage::{EdgeMap, Grid, LabelImage, RangeImage};
-use rangeseg::evaluate::{EdgeScores, ImageScores, hoover_curve_ts};
+use rangeseg::evaluate::{CURVE_TS, EdgeScores, ImageScores};
 use rangeseg::pipeline::{Output, StageTimings};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -328,7 +328,7 @@ fn published_rows(rows: &[ImageRow]) -> Vec<Vec<String>> {
 
 /// Mean correct detections over T for both segmentations.
 fn curve(r: &Report) -> Vec<(f64, f64, f64)> {
-    hoover_curve_ts()
+    CURVE_TS
         .iter()
         .enumerate()
         .map(|(i, &t)| {

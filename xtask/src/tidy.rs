@@ -4,10 +4,22 @@ use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 
 /// Stage crates: each may depend on `rangeimage` and on math or utility crates, never on another stage or on I/O.
-const STAGES: &[&str] = &["features", "regiongrow", "vcanny", "relax", "eval", "scenegen"];
+const STAGES: &[&str] = &["features", "regiongrow", "vcanny", "relax", "finalseg", "eval", "scenegen"];
+/// Shared crates every stage may depend on; they obey the stages' rule themselves.
+const SHARED: &[&str] = &["rangeimage", "planefit"];
 /// Crates a stage must not depend on (dev-dependencies included).
-const FORBIDDEN_FOR_STAGES: &[&str] =
-    &["features", "regiongrow", "vcanny", "relax", "eval", "scenegen", "rangeio", "rangeseg", "image"];
+const FORBIDDEN_FOR_STAGES: &[&str] = &[
+    "features",
+    "regiongrow",
+    "vcanny",
+    "relax",
+    "finalseg",
+    "eval",
+    "scenegen",
+    "rangeio",
+    "rangeseg",
+    "image",
+];
 
 /// Runs every check and returns the problems found, one line each.
 pub fn problems(root: &Path) -> Result<Vec<String>> {
@@ -36,7 +48,7 @@ pub fn problems(root: &Path) -> Result<Vec<String>> {
             problems.push(format!("{}: missing `[lints] workspace = true`", rel(root, manifest)));
         }
         let name = doc.get("package").and_then(|p| p.get("name")).and_then(|n| n.as_str()).unwrap_or("");
-        if STAGES.contains(&name) {
+        if STAGES.contains(&name) || SHARED.contains(&name) {
             for table in ["dependencies", "dev-dependencies", "build-dependencies"] {
                 let Some(deps) = doc.get(table).and_then(|d| d.as_table()) else { continue };
                 for dep in deps.keys() {

@@ -88,24 +88,7 @@ fn objective(name: &str, s: &Sample) -> f64 {
 
 /// Runs `cargo xtask tune`.
 pub fn run(root: &Path, args: &[String]) -> Result<()> {
-    let mut grid_path = root.join("configs/tune.toml");
-    let mut objective_name: Option<String> = None;
-    let mut write = false;
-    let (mut specs, rest) = crate::data::parse_specs(args)?;
-    if specs.is_empty() {
-        specs.push(DataSpec::synthetic());
-    }
-    let mut it = rest.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--grid" => grid_path = it.next().context("--grid needs a file")?.into(),
-            "--objective" => objective_name = Some(it.next().context("--objective needs a name")?.clone()),
-            "--write" => write = true,
-            other => bail!(
-                "unknown option {other}\nusage: cargo xtask tune [--grid configs/tune.toml] [--objective NAME] [--data DIR|synthetic [--camera CAM]]... [--write]"
-            ),
-        }
-    }
+    let Options { grid_path, objective_name, write, specs } = options(root, args)?;
     let text = std::fs::read_to_string(&grid_path)
         .with_context(|| format!("{}: cannot read", grid_path.display()))?;
     let tune: TuneFile =
@@ -136,10 +119,7 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
             .join("; ")
     );
 
-    let features_cache: Cache<SurfaceFeatures> = Cache::new();
-    // Region growing and Canny are cached with their own scores, which do not depend on the later stages.
-    let regions_cache: Cache<(regiongrow::Segmentation, f64)> = Cache::new();
-    let canny_cache: Cache<(vcanny::Edges, f64)> = Cache::new();
+    let caches = Caches::default();
 
     let bar = ProgressBar::new((combos.len() * images.len()) as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}")
@@ -150,70 +130,165 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let samples: Vec<Sample> = jobs
         .par_iter()
         .map(|&(c, i)| {
-            let (_, config) = &combos[c];
-            let img = &images[i];
-            let fkey = format!("{}|{}|{}", img.set, img.stem, toml_of(&config.features));
-            let features =
-                features_cache.get(fkey.clone(), || features::compute(&img.range, &config.features));
-            let rkey = format!("{fkey}|{}|{}", toml_of(&config.regiongrow), config.seed);
-            let regions = regions_cache.get(rkey, || {
-                let (seg, _) =
-                    regiongrow::grow(&img.range, &features, &img.camera, &config.regiongrow, config.seed);
-                let h = rangeseg::evaluate::hoover(&img.gt, &seg.labels, &seg.regions, &img.angles);
-                (seg, f64::from(h.correct))
-            });
-            let ckey = format!("{fkey}|{}", toml_of(&config.vcanny));
-            let canny = canny_cache.get(ckey, || {
-                let e = vcanny::detect_planes(
-                    &features.plane,
-                    &rangeimage::valid_mask(&img.range),
-                    &config.vcanny,
-                );
-                let f = eval::boundary::matched(&e.edges, &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
-                (e, f)
-            });
-            let fin =
-                rangeseg::pipeline::finish(&img.range, &img.camera, config, &features, &regions.0, &canny.0);
-            let h = rangeseg::evaluate::hoover(&img.gt, &fin.labels, &fin.final_regions, &img.angles);
-            let f = eval::boundary::matched(fin.edges(), &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
-            let pp = eval::paper_precision(fin.edges(), &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX)
-                .unwrap_or(0.0);
+            let sample = evaluate(&images[i], &combos[c].1, &caches);
             bar.inc(1);
-            Sample {
-                correct: f64::from(h.correct),
-                over: f64::from(h.over),
-                under: f64::from(h.under),
-                gt_regions: f64::from(h.gt_regions),
-                rg_correct: regions.1,
-                f,
-                c2_f: canny.1,
-                c2_pp: eval::paper_precision(&canny.0.edges, &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX)
-                    .unwrap_or(0.0),
-                pp,
-            }
+            sample
         })
         .collect();
     bar.finish_and_clear();
 
+    let ranking = rank(&samples, combos.len(), &images, sets.len(), &objective_name);
+    let best = ranking.best;
+
+    let out = root.join("target/tune");
+    std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let keys: Vec<&String> = tune.grid.keys().collect();
+    let csv = results_csv(&keys, &combos, &sets, &ranking.per_set, &ranking.means, &objective_name);
+    let best_config = &combos[best].1;
+    let best_toml = best_config.to_toml();
+    let report = report_md(
+        &crate::shown(root, &grid_path),
+        &objective_name,
+        &keys,
+        &combos,
+        images.len(),
+        &sets,
+        &ranking,
+    );
+    for (name, text) in
+        [("results.csv", csv), ("best.toml", best_toml.clone()), ("report.md", report.clone())]
+    {
+        rangeio::write_atomic(&out.join(name), text.as_bytes())?;
+    }
+    eprintln!("{report}");
+    eprintln!("wrote {}", out.display());
+    if write {
+        let best_toml = best_config.to_commented_toml();
+        let path = root.join("configs/default.toml");
+        let text = format!(
+            "# The default configuration: our best, tuned on the training split by `cargo xtask tune --write`\n# (objective {objective_name}). It must equal Config::default() (a test checks it): after --write,\n# copy the changed values into the stages' Params::default().\n\n{best_toml}"
+        );
+        rangeio::write_atomic(&path, text.as_bytes())?;
+        eprintln!("updated {}", path.display());
+    }
+    Ok(())
+}
+
+/// The command line of `cargo xtask tune`.
+struct Options {
+    grid_path: std::path::PathBuf,
+    objective_name: Option<String>,
+    write: bool,
+    specs: Vec<DataSpec>,
+}
+
+/// Parses the command line of `cargo xtask tune` (no data set given: the synthetic one).
+fn options(root: &Path, args: &[String]) -> Result<Options> {
+    let mut grid_path = root.join("configs/tune.toml");
+    let mut objective_name: Option<String> = None;
+    let mut write = false;
+    let (mut specs, rest) = crate::data::parse_specs(args)?;
+    if specs.is_empty() {
+        specs.push(DataSpec::synthetic());
+    }
+    let mut it = rest.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--grid" => grid_path = it.next().context("--grid needs a file")?.into(),
+            "--objective" => objective_name = Some(it.next().context("--objective needs a name")?.clone()),
+            "--write" => write = true,
+            other => bail!(
+                "unknown option {other}\nusage: cargo xtask tune [--grid configs/tune.toml] [--objective NAME] [--data DIR|synthetic [--camera CAM]]... [--write]"
+            ),
+        }
+    }
+    Ok(Options { grid_path, objective_name, write, specs })
+}
+
+/// The stage outputs shared between grid combinations: features by their parameters, region
+/// growing and Canny with their own scores (which do not depend on the later stages).
+struct Caches {
+    features: Cache<SurfaceFeatures>,
+    regions: Cache<(regiongrow::Segmentation, f64)>,
+    canny: Cache<(vcanny::Edges, f64)>,
+}
+
+impl Default for Caches {
+    fn default() -> Self {
+        Self { features: Cache::new(), regions: Cache::new(), canny: Cache::new() }
+    }
+}
+
+/// The scores of one configuration on one image (stage outputs from `caches` where present).
+fn evaluate(img: &Image, config: &Config, caches: &Caches) -> Sample {
+    let fkey = format!("{}|{}|{}", img.set, img.stem, toml_of(&config.features));
+    let features = caches.features.get(fkey.clone(), || features::compute(&img.range, &config.features));
+    let rkey = format!("{fkey}|{}|{}", toml_of(&config.regiongrow), config.seed);
+    let regions = caches.regions.get(rkey, || {
+        let (seg, _) = regiongrow::grow(&img.range, &features, &img.camera, &config.regiongrow, config.seed);
+        let h = rangeseg::evaluate::hoover(&img.gt, &seg.labels, &seg.regions, &img.angles);
+        (seg, f64::from(h.correct))
+    });
+    let ckey = format!("{fkey}|{}", toml_of(&config.vcanny));
+    let canny = caches.canny.get(ckey, || {
+        let e = vcanny::detect_planes(&features.plane, &rangeimage::valid_mask(&img.range), &config.vcanny);
+        let f = eval::boundary::matched(&e.edges, &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
+        (e, f)
+    });
+    let fin = rangeseg::pipeline::finish(&img.range, &img.camera, config, &features, &regions.0, &canny.0);
+    let h = rangeseg::evaluate::hoover(&img.gt, &fin.labels, &fin.final_regions, &img.angles);
+    let f = eval::boundary::matched(fin.edges(), &img.gt, rangeseg::evaluate::TOLERANCE_PX).f;
+    let pp =
+        eval::paper_precision(fin.edges(), &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX).unwrap_or(0.0);
+    Sample {
+        correct: f64::from(h.correct),
+        over: f64::from(h.over),
+        under: f64::from(h.under),
+        gt_regions: f64::from(h.gt_regions),
+        rg_correct: regions.1,
+        f,
+        c2_f: canny.1,
+        c2_pp: eval::paper_precision(&canny.0.edges, &regions.0.c1, rangeseg::evaluate::TOLERANCE_PX)
+            .unwrap_or(0.0),
+        pp,
+    }
+}
+
+/// Per combination: the mean sample of each data set, the mean over the sets with the objective,
+/// and the best combination.
+struct Ranking {
+    per_set: Vec<Vec<Sample>>,
+    means: Vec<(Sample, f64)>,
+    best: usize,
+}
+
+/// Ranks the combinations by `objective_name` (`samples` combination-major over `images`).
+fn rank(
+    samples: &[Sample],
+    n_combos: usize,
+    images: &[Image],
+    n_sets: usize,
+    objective_name: &str,
+) -> Ranking {
     // Average per combination and data set in a fixed order (rayon's float reductions depend on scheduling); the
     // objective of a combination is the mean of its sets' objectives, so each set weighs the same.
-    let per_set: Vec<Vec<Sample>> = (0..combos.len())
+    let per_set: Vec<Vec<Sample>> = (0..n_combos)
         .map(|c| {
             let rows = &samples[c * images.len()..(c + 1) * images.len()];
-            (0..sets.len())
+            (0..n_sets)
                 .map(|k| {
                     let set_rows: Vec<&Sample> =
-                        rows.iter().zip(&images).filter(|(_, img)| img.set == k).map(|(s, _)| s).collect();
+                        rows.iter().zip(images).filter(|(_, img)| img.set == k).map(|(s, _)| s).collect();
                     mean_sample(&set_rows)
                 })
                 .collect()
         })
         .collect();
-    let n_sets = sets.len() as f64;
+    let n_sets_f = n_sets as f64;
     let means: Vec<(Sample, f64)> = per_set
         .iter()
         .map(|set_means| {
-            let score = set_means.iter().map(|m| objective(&objective_name, m)).sum::<f64>() / n_sets;
+            let score = set_means.iter().map(|m| objective(objective_name, m)).sum::<f64>() / n_sets_f;
             let refs: Vec<&Sample> = set_means.iter().collect();
             (mean_sample(&refs), score)
         })
@@ -226,20 +301,28 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     let key = |c: usize| (tie(means[c].1), tie(means[c].0.rg_correct), means[c].0.f);
     let best = (0..means.len())
         .fold(0, |b, c| if key(c).partial_cmp(&key(b)) == Some(std::cmp::Ordering::Greater) { c } else { b });
+    Ranking { per_set, means, best }
+}
 
-    let out = root.join("target/tune");
-    std::fs::create_dir_all(&out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let keys: Vec<&String> = tune.grid.keys().collect();
+/// `target/tune/results.csv`: one row per combination, its values, objective and mean scores.
+fn results_csv(
+    keys: &[&String],
+    combos: &[(Vec<toml::Value>, Config)],
+    sets: &[DataSet],
+    per_set: &[Vec<Sample>],
+    means: &[(Sample, f64)],
+    objective_name: &str,
+) -> String {
     let mut csv = keys.iter().map(|k| k.as_str()).collect::<Vec<_>>().join(",");
     csv.push_str(",objective,correct,over,under,gt_regions,rg_correct,f,c2_f,paper_precision");
-    for set in &sets {
+    for set in sets {
         let _ = write!(csv, ",objective_{}", set.name);
     }
     csv.push('\n');
     for (c, (m, score)) in means.iter().enumerate() {
         let vals: Vec<String> = combos[c].0.iter().map(|v| v.to_string()).collect();
         let set_scores: String =
-            per_set[c].iter().map(|m| format!(",{:.5}", objective(&objective_name, m))).collect();
+            per_set[c].iter().map(|m| format!(",{:.5}", objective(objective_name, m))).collect();
         let _ = writeln!(
             csv,
             "{},{score:.5},{:.3},{:.3},{:.3},{:.3},{:.3},{:.5},{:.5},{:.5}{set_scores}",
@@ -254,14 +337,26 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
             m.pp
         );
     }
-    let best_config = &combos[best].1;
-    let best_toml = best_config.to_toml();
-    let (bm, bs) = &means[best];
+    csv
+}
+
+/// `target/tune/report.md`: the grid, the best combination and its scores per data set.
+fn report_md(
+    shown_grid: &str,
+    objective_name: &str,
+    keys: &[&String],
+    combos: &[(Vec<toml::Value>, Config)],
+    n_images: usize,
+    sets: &[DataSet],
+    ranking: &Ranking,
+) -> String {
+    let best = ranking.best;
+    let (bm, bs) = &ranking.means[best];
     let mut report = format!(
         "# rangeseg tuning\n\nGrid `{}` ({} combinations) over {} images of {} data set{} ({}); objective `{objective_name}`: {}{}.\n\n",
-        crate::shown(root, &grid_path),
+        shown_grid,
         combos.len(),
-        images.len(),
+        n_images,
         sets.len(),
         if sets.len() == 1 { "" } else { "s" },
         sets.iter()
@@ -279,12 +374,12 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         report,
         "\n| data set | objective | correct | GT regions | region growing alone | over | under | boundary F | C2 alone F | paper precision vs C1 |\n|---|---|---|---|---|---|---|---|---|---|"
     );
-    for (set, m) in sets.iter().zip(&per_set[best]) {
+    for (set, m) in sets.iter().zip(&ranking.per_set[best]) {
         let _ = writeln!(
             report,
             "| {} | {:.4} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.4} | {:.4} | {:.4} |",
             set.name,
-            objective(&objective_name, m),
+            objective(objective_name, m),
             m.correct,
             m.gt_regions,
             m.rg_correct,
@@ -300,22 +395,7 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         "\nMeans over the data sets: correct {:.2} of {:.2} GT regions (region growing alone {:.2}), over {:.2}, under {:.2}, boundary F {:.4} (C2 alone {:.4}), paper precision vs C1 {:.4}.",
         bm.correct, bm.gt_regions, bm.rg_correct, bm.over, bm.under, bm.f, bm.c2_f, bm.pp
     );
-    for (name, text) in
-        [("results.csv", csv), ("best.toml", best_toml.clone()), ("report.md", report.clone())]
-    {
-        rangeio::write_atomic(&out.join(name), text.as_bytes())?;
-    }
-    eprintln!("{report}");
-    eprintln!("wrote {}", out.display());
-    if write {
-        let path = root.join("configs/default.toml");
-        let text = format!(
-            "# The default configuration: our best, tuned on the training split by `cargo xtask tune --write`\n# (objective {objective_name}). It must equal Config::default() (a test checks it): after --write,\n# copy the changed values into the stages' Params::default().\n\n{best_toml}"
-        );
-        rangeio::write_atomic(&path, text.as_bytes())?;
-        eprintln!("updated {}", path.display());
-    }
-    Ok(())
+    report
 }
 
 /// A stage's parameters as canonical TOML text, the cache key of what it computes.

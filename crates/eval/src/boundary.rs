@@ -22,7 +22,7 @@
 //!   (C1 beside C2) would match the two sides of the GT band and score as one perfect edge.
 //!   Two consequences: the thinned band keeps one side of the crack (for a straight vertical or
 //!   horizontal one, the left or lower side), so a detection on the other side is matched at up
-//!   to `τ − 1` px of it; and a segmentation's own boundaries ([`label_boundaries`]) hold its
+//!   to `τ − 1` px of it; and a segmentation's own boundaries ([`rangeimage::boundary::label_boundaries`]) hold its
 //!   unlabelled separator pixels, which can move the thinned line near unlabelled GT, so even a
 //!   segmentation equal to the GT may score slightly below 1 there.
 //!   BSDS solves a min-cost assignment with an outlier cost; its cardinality is the maximum one,
@@ -72,34 +72,7 @@ impl Prf {
 
 /// GT boundary: pixels labelled ≥ 10 with a 4-neighbour labelled ≥ 10 and different.
 pub fn gt_boundaries(gt: &LabelImage) -> EdgeMap {
-    region_boundaries(gt, |l| l >= FIRST_REGION_LABEL, false)
-}
-
-/// Boundaries of a segmentation, given which labels are regions.
-///
-/// A pixel is a boundary pixel if (a) it is a region pixel with a 4-neighbour in a different
-/// region (the GT rule), or (b) it is an unlabelled pixel whose 4-neighbours include two different
-/// regions, so a one-pixel-wide unlabelled line between two regions (as edge-based segmenters
-/// leave) counts as their boundary. Region-to-unlabelled transitions are not boundaries.
-pub fn label_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool) -> EdgeMap {
-    region_boundaries(labels, is_region, true)
-}
-
-fn region_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool, separators: bool) -> EdgeMap {
-    let (w, h) = labels.dimensions();
-    let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| is_region(l));
-    Grid::from_fn(w, h, |x, y| {
-        let (x, y) = (i64::from(x), i64::from(y));
-        let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
-        match at(x, y) {
-            Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
-            None if separators => {
-                let mut it = nb.iter().flatten();
-                it.next().is_some_and(|&first| it.any(|&m| m != first))
-            }
-            None => false,
-        }
-    })
+    rangeimage::boundary::region_borders(gt, |l| l >= FIRST_REGION_LABEL)
 }
 
 /// Don't-care mask for `gt`: pixels within `tolerance_px` of a GT pixel labelled 0..=9.
@@ -354,9 +327,6 @@ mod tests {
         let b = gt_boundaries(&gt);
         let row: Vec<bool> = b.rows().next().unwrap().to_vec();
         assert_eq!(row, vec![false, true, true, false, false, false]);
-        // The unlabelled column separates 11 and 12: a segmentation boundary, not a GT one.
-        let s = label_boundaries(&gt, |l| l != 0);
-        assert_eq!(s.rows().next().unwrap().to_vec(), vec![false, true, true, false, true, false]);
     }
 
     #[test]

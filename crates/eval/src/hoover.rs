@@ -45,8 +45,17 @@ use crate::boundary::FIRST_REGION_LABEL;
 use rangeimage::LabelImage;
 use std::collections::HashMap;
 
-/// The values of T of Hoover et al.'s performance curves (0.51 to 0.95).
-pub const CURVE_TS: [f64; 10] = [0.51, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95];
+/// The values of T of Hoover et al.'s performance curves: 0.51 to 0.95 in steps of 0.02 (each
+/// computed as `0.51 + 0.02·i`).
+pub const CURVE_TS: [f64; 23] = {
+    let mut ts = [0.0; 23];
+    let mut i = 0;
+    while i < 23 {
+        ts[i] = 0.51 + 0.02 * i as f64;
+        i += 1;
+    }
+    ts
+};
 
 /// Which labels of a label image name regions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -26,7 +26,13 @@ pub use boundary::Prf;
 pub use hoover::{Convention, HooverScore};
 pub use jin::JinScore;
 
+use rangeimage::ParamError;
 use rangeimage::{EdgeMap, LabelImage};
+
+/// The edge tolerance τ of the boundary and paper-precision metrics, in pixels (docs/method.md §3.5).
+pub const TOLERANCE_PX: f64 = 2.0;
+/// The Hoover tolerance T of the main table (docs/method.md §3.5).
+pub const HOOVER_T: f64 = 0.8;
 
 /// The paper's precision (Eq. 7): detected edge pixels within `tolerance_px` of a `reference`
 /// edge pixel ÷ detected edge pixels.
@@ -37,6 +43,7 @@ use rangeimage::{EdgeMap, LabelImage};
 ///
 /// # Panics
 /// If the sizes differ or `tolerance_px` is negative or not finite.
+#[must_use]
 pub fn paper_precision(detected: &EdgeMap, reference: &EdgeMap, tolerance_px: f64) -> Option<f64> {
     let _s = tracing::info_span!("eval::paper_precision").entered();
     assert!(
@@ -75,18 +82,29 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        Self { tolerance_px: 2.0, hoover_t: 0.8, seg_convention: Convention::Auto, hoover_curve: false }
+        Self {
+            tolerance_px: TOLERANCE_PX,
+            hoover_t: HOOVER_T,
+            seg_convention: Convention::Auto,
+            hoover_curve: false,
+        }
     }
 }
 
 impl Params {
     /// Checks the values; the message names the bad field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if !(self.tolerance_px.is_finite() && self.tolerance_px >= 0.0) {
-            return Err(format!("eval.tolerance_px must be finite and ≥ 0, got {}", self.tolerance_px));
+            return Err(ParamError::new(
+                "eval.tolerance_px",
+                format!("must be finite and ≥ 0, got {}", self.tolerance_px),
+            ));
         }
         if !(self.hoover_t > 0.5 && self.hoover_t <= 1.0) {
-            return Err(format!("eval.hoover_t must be in (0.5, 1], got {}", self.hoover_t));
+            return Err(ParamError::new(
+                "eval.hoover_t",
+                format!("must be in (0.5, 1], got {}", self.hoover_t),
+            ));
         }
         Ok(())
     }
@@ -122,7 +140,7 @@ impl<'a> Inputs<'a> {
 pub enum BoundarySource {
     /// The edge map given as input.
     Edges,
-    /// The segmentation's own region boundaries ([`boundary::label_boundaries`]).
+    /// The segmentation's own region boundaries ([`rangeimage::boundary::label_boundaries`]).
     Segmentation,
 }
 
@@ -160,12 +178,12 @@ pub struct Scores {
 /// `params.seg_convention`. The angle error needs both `gt_angles` and `seg_normals`.
 ///
 /// # Panics
-/// If the images differ in size or `params` is invalid ([`Params::validate`]).
+/// If the images differ in size; in debug builds also if `params` is invalid ([`Params::validate`]:
+/// callers validate once, at the edge).
+#[must_use]
 pub fn score(inputs: &Inputs<'_>, params: &Params) -> Scores {
     let _s = tracing::info_span!("eval").entered();
-    if let Err(e) = params.validate() {
-        panic!("invalid eval parameters: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "invalid eval parameters");
     let gt = inputs.gt;
     let (hoover, hoover_curve) = match inputs.seg {
         Some(seg) => {
@@ -186,7 +204,10 @@ pub fn score(inputs: &Inputs<'_>, params: &Params) -> Scores {
         (Some(e), _) => Some((e.clone(), BoundarySource::Edges)),
         (None, Some(seg)) => {
             let conv = params.seg_convention.resolve(seg);
-            Some((boundary::label_boundaries(seg, |l| conv.is_region(l)), BoundarySource::Segmentation))
+            Some((
+                rangeimage::boundary::label_boundaries(seg, |l| conv.is_region(l)),
+                BoundarySource::Segmentation,
+            ))
         }
         (None, None) => None,
     };

@@ -27,6 +27,7 @@ mod plane;
 mod quadratic;
 mod shade;
 
+use rangeimage::ParamError;
 use rangeimage::{Grid, PlaneMap, RangeImage, SurfaceFeatures};
 
 /// The `[features]` table of a config file.
@@ -49,29 +50,28 @@ impl Default for Params {
 
 impl Params {
     /// Checks the values; the message names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
-        let odd = |name: &str, v: u32, min: u32| {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let odd = |name: &'static str, v: u32, min: u32| {
             if v < min || v.is_multiple_of(2) || v > 101 {
-                Err(format!("features.{name} must be odd and in {min}..=101, got {v}"))
+                Err(ParamError::new(name, format!("must be odd and in {min}..=101, got {v}")))
             } else {
                 Ok(())
             }
         };
-        odd("window_px", self.window_px, 3)?;
-        odd("deriv_window_px", self.deriv_window_px, 3)?;
-        odd("k_std_window_px", self.k_std_window_px, 1)
+        odd("features.window_px", self.window_px, 3)?;
+        odd("features.deriv_window_px", self.deriv_window_px, 3)?;
+        odd("features.k_std_window_px", self.k_std_window_px, 1)
     }
 }
 
 /// Computes every field of [`SurfaceFeatures`] for `range` (NaN = no data).
 ///
 /// # Panics
-/// If `params` is invalid (see [`Params::validate`]).
+/// In debug builds, if `params` is invalid ([`Params::validate`]: callers validate once, at the edge).
+#[must_use]
 pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
     let _s = tracing::info_span!("features", w = range.width(), h = range.height()).entered();
-    if let Err(e) = params.validate() {
-        panic!("invalid features params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
     let f = compute_with(range, params, fit::Path::Fast, SurfaceFeatures::default());
     tracing::debug!(
         valid_planes = f.plane.as_slice().iter().filter(|p| p[0].is_finite()).count(),
@@ -86,12 +86,10 @@ pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
 /// bit-identical to [`compute`]; `out` may hold any size before.
 ///
 /// # Panics
-/// If `params` is invalid (see [`Params::validate`]).
+/// In debug builds, if `params` is invalid ([`Params::validate`]: callers validate once, at the edge).
 pub fn compute_into(range: &RangeImage, params: &Params, out: &mut SurfaceFeatures) {
     let _s = tracing::info_span!("features", w = range.width(), h = range.height()).entered();
-    if let Err(e) = params.validate() {
-        panic!("invalid features params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
     let buffers = std::mem::take(out);
     *out = compute_with(range, params, fit::Path::Fast, buffers);
 }
@@ -189,12 +187,11 @@ impl Derivatives {
 /// pixels do not determine a quadratic.
 ///
 /// # Panics
-/// If `params` is invalid (see [`Params::validate`]).
+/// In debug builds, if `params` is invalid ([`Params::validate`]: callers validate once, at the edge).
+#[must_use]
 pub fn derivatives(range: &RangeImage, params: &Params) -> Derivatives {
     let _s = tracing::info_span!("features::derivatives", w = range.width(), h = range.height()).entered();
-    if let Err(e) = params.validate() {
-        panic!("invalid features params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
     derivatives_with(range, params.deriv_window_px, fit::Path::Fast)
 }
 
@@ -224,6 +221,7 @@ fn derivatives_with(range: &RangeImage, window_px: u32, path: fit::Path) -> Deri
 ///
 /// # Panics
 /// If `window_px` is even or smaller than 3.
+#[must_use]
 pub fn fit_planes(range: &RangeImage, window_px: u32) -> PlaneMap {
     let _s = tracing::info_span!("features::fit_planes", w = range.width(), h = range.height()).entered();
     assert!(
@@ -235,6 +233,7 @@ pub fn fit_planes(range: &RangeImage, window_px: u32) -> PlaneMap {
 
 /// A Lambertian shading of `range` (light from the viewer's upper left, normals from 5×5 plane fits);
 /// no-data pixels are 0 (black), valid pixels 1..=255.
+#[must_use]
 pub fn shade(range: &RangeImage) -> Grid<u8> {
     let _s = tracing::info_span!("features::shade", w = range.width(), h = range.height()).entered();
     shade::shade_planes(&plane::fit(range, 5))
@@ -872,7 +871,10 @@ mod tests {
     #[test]
     fn validate_rejects_even_windows() {
         assert!(Params::default().validate().is_ok());
-        assert!(Params { window_px: 4, ..Params::default() }.validate().unwrap_err().contains("window_px"));
+        assert!(
+            Params { window_px: 4, ..Params::default() }.validate().unwrap_err().field
+                == "features.window_px"
+        );
         assert!(Params { deriv_window_px: 1, ..Params::default() }.validate().is_err());
     }
 }

@@ -11,6 +11,7 @@ use crate::Grid;
 ///
 /// Separable: an exact 1D distance along each column (two linear sweeps, binary input), then the
 /// lower envelope of parabolas along each row. O(width · height).
+#[must_use]
 pub fn edt_squared(mask: &Grid<bool>) -> Grid<f64> {
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let m = mask.as_slice();
@@ -96,6 +97,7 @@ pub fn edt_squared(mask: &Grid<bool>) -> Grid<f64> {
 /// `reach[dy]` for `dy = 0..=⌊t⌋`: the largest `dx ≥ 0` with `dx² + dy² ≤ t²` (compared in f64,
 /// exact for these integers), so a pixel is within `t` of one `dy` rows away iff that one is at
 /// most `reach[dy]` columns away.
+#[must_use]
 pub fn reach(t: f64) -> Vec<usize> {
     let t2 = t * t;
     (0..=t.floor() as usize)
@@ -117,6 +119,7 @@ pub fn reach(t: f64) -> Vec<usize> {
 /// `0 ≤ t < 65535`, as row distances are kept in `u16`): the same as `edt_squared(mask) ≤ t²`, in O(pixels · t)
 /// cheap vectorisable steps (for large `t`, threshold [`edt_squared`] instead: O(pixels) whatever `t`). Per row, the horizontal distance to the nearest mask pixel (capped at ⌊t⌋ + 1) by two
 /// sweeps; then a pixel is near if a row `dy` away has that distance ≤ `reach[dy]`.
+#[must_use]
 pub fn within(mask: &Grid<bool>, t: f64) -> Grid<bool> {
     assert!(t.is_finite() && (0.0..65535.0).contains(&t), "distance::within: distance {t} out of range");
     let (w, h) = (mask.width() as usize, mask.height() as usize);

@@ -53,6 +53,76 @@ pub fn pcd_from_bytes(bytes: &[u8], path: &Path) -> Result<Cloud, ReadError> {
 
 /// [`pcd_from_bytes`] refusing headers of more than `max_pixels` points.
 pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64) -> Result<Cloud, ReadError> {
+    let header = parse_header(bytes, path)?;
+    let p = || path.to_path_buf();
+    if header.height == 1 {
+        return Err(ReadError::Unsupported {
+            path: p(),
+            what: "unorganized point cloud (HEIGHT 1): a range image needs an organized cloud".into(),
+        });
+    }
+    let (w, h) = check_dims(path, header.width, header.height, max_pixels)?;
+    let n = w * h;
+    if let Some(pts) = header.points
+        && pts != n as u64
+    {
+        return Err(ReadError::Invalid {
+            path: p(),
+            what: format!("pcd header: POINTS {pts} but WIDTH·HEIGHT = {n}"),
+        });
+    }
+    let fields = field_layout(&header, path)?;
+    let record: usize = fields.iter().map(|f| f.size * f.count).sum();
+    let xyz = xyz_fields(&fields, &header.names, path)?;
+    let data = &bytes[header.data_start..];
+    let [xs, ys, zs] = match header.format {
+        Format::PcdAscii => decode_ascii(bytes, header.data_start, &fields, xyz, n, path)?,
+        Format::PcdBinary => {
+            let need = n as u64 * record as u64;
+            if (data.len() as u64) < need {
+                return Err(ReadError::Truncated {
+                    path: p(),
+                    what: "pcd binary point data",
+                    expected: header.data_start as u64 + need,
+                    found: bytes.len() as u64,
+                });
+            }
+            xyz.map(|f| (0..n).map(|i| read_float(data, i * record + f.offset, f.size)).collect())
+        }
+        _ => decode_compressed(bytes, header.data_start, record, xyz, n, path)?,
+    };
+    let valid: Vec<bool> =
+        (0..n).map(|i| xs[i].is_finite() && ys[i].is_finite() && zs[i].is_finite() && zs[i] > 0.0).collect();
+    let grid = |v: &[f64]| {
+        let data = v.iter().zip(&valid).map(|(&a, &ok)| if ok { a as f32 } else { f32::NAN }).collect();
+        Grid::from_vec(w as u32, h as u32, data).expect("n = w·h")
+    };
+    Ok(Cloud {
+        x: grid(&xs),
+        y: grid(&ys),
+        z: grid(&zs),
+        format: header.format,
+        z_bits: 8 * xyz[2].size as u8,
+    })
+}
+
+/// The header lines of a PCD file, up to and including `DATA`.
+struct Header {
+    names: Vec<String>,
+    sizes: Vec<u64>,
+    types: Vec<String>,
+    counts: Vec<u64>,
+    width: u64,
+    height: u64,
+    points: Option<u64>,
+    format: Format,
+    /// Offset of the first byte after the `DATA` line.
+    data_start: usize,
+}
+
+/// Reads the header (at most [`MAX_HEADER_LINES`] lines): every required line present, one entry
+/// per field in `SIZE`, `TYPE` and `COUNT` (`COUNT` defaults to 1 each).
+fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, ReadError> {
     let p = || path.to_path_buf();
     let perr = |line: usize, problem: String| ReadError::Parse { path: p(), line, problem };
     let mut pos = 0;
@@ -129,22 +199,14 @@ pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64)
             ),
         });
     }
-    if height == 1 {
-        return Err(ReadError::Unsupported {
-            path: p(),
-            what: "unorganized point cloud (HEIGHT 1): a range image needs an organized cloud".into(),
-        });
-    }
-    let (w, h) = check_dims(path, width, height, max_pixels)?;
-    let n = w * h;
-    if let Some(pts) = points
-        && pts != n as u64
-    {
-        return Err(ReadError::Invalid {
-            path: p(),
-            what: format!("pcd header: POINTS {pts} but WIDTH·HEIGHT = {n}"),
-        });
-    }
+    Ok(Header { names, sizes, types, counts, width, height, points, format, data_start: pos })
+}
+
+/// The byte layout of one point record: every field a supported type, the record at most
+/// [`MAX_RECORD_BYTES`] long, no name but `_` twice.
+fn field_layout(header: &Header, path: &Path) -> Result<Vec<Field>, ReadError> {
+    let p = || path.to_path_buf();
+    let (names, sizes, types, counts) = (&header.names, &header.sizes, &header.types, &header.counts);
     let mut fields = Vec::with_capacity(names.len());
     let mut offset = 0usize;
     for i in 0..names.len() {
@@ -176,7 +238,6 @@ pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64)
         });
         offset += bytes_here;
     }
-    let record = offset;
     // PCL pads records with fields named `_`; any other name must be unique, or which `z` is the
     // range would be a guess.
     for (i, name) in names.iter().enumerate() {
@@ -187,14 +248,19 @@ pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64)
             });
         }
     }
+    Ok(fields)
+}
+
+/// The `x`, `y` and `z` fields, each one `F4` or `F8` value.
+fn xyz_fields<'a>(fields: &'a [Field], names: &[String], path: &Path) -> Result<[&'a Field; 3], ReadError> {
     let find = |name: &str| -> Result<&Field, ReadError> {
         let f = fields.iter().find(|f| f.name == name).ok_or_else(|| ReadError::Unsupported {
-            path: p(),
+            path: path.to_path_buf(),
             what: format!("pcd field layout: no `{name}` field (fields: {})", names.join(" ")),
         })?;
         if f.kind != b'F' || !matches!(f.size, 4 | 8) || f.count != 1 {
             return Err(ReadError::Unsupported {
-                path: p(),
+                path: path.to_path_buf(),
                 what: format!(
                     "pcd field layout: `{name}` must be one F4 or F8 value, is {}{} ×{}",
                     f.kind as char, f.size, f.count
@@ -203,113 +269,110 @@ pub(crate) fn pcd_from_bytes_limited(bytes: &[u8], path: &Path, max_pixels: u64)
         }
         Ok(f)
     };
-    let xyz = [find("x")?, find("y")?, find("z")?];
-    let data = &bytes[pos..];
+    Ok([find("x")?, find("y")?, find("z")?])
+}
+
+/// x, y and z of the `n` points of `DATA ascii` (one point per non-blank line from `data_start`).
+fn decode_ascii(
+    bytes: &[u8],
+    data_start: usize,
+    fields: &[Field],
+    xyz: [&Field; 3],
+    n: usize,
+    path: &Path,
+) -> Result<[Vec<f64>; 3], ReadError> {
+    let p = || path.to_path_buf();
+    let perr = |line: usize, problem: String| ReadError::Parse { path: p(), line, problem };
+    let text = std::str::from_utf8(&bytes[data_start..])
+        .map_err(|_| ReadError::Invalid { path: p(), what: "pcd ascii data: not text".into() })?;
+    let tokens_per_point: usize = fields.iter().map(|f| f.count).sum();
+    // Token index of each of x, y, z within a point's line.
+    let tok_index: Vec<usize> =
+        xyz.iter().map(|f| fields.iter().take_while(|g| g.name != f.name).map(|g| g.count).sum()).collect();
     let mut out = [vec![0f64; 0], vec![], vec![]];
-    match format {
-        Format::PcdAscii => {
-            let text = std::str::from_utf8(data)
-                .map_err(|_| ReadError::Invalid { path: p(), what: "pcd ascii data: not text".into() })?;
-            let tokens_per_point: usize = fields.iter().map(|f| f.count).sum();
-            // Token index of each of x, y, z within a point's line.
-            let tok_index: Vec<usize> = xyz
-                .iter()
-                .map(|f| fields.iter().take_while(|g| g.name != f.name).map(|g| g.count).sum())
-                .collect();
-            for o in &mut out {
-                o.reserve(n.min(text.len() / 2 + 1));
-            }
-            let header_lines = bytes[..pos].iter().filter(|&&b| b == b'\n').count();
-            let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-            for _ in 0..n {
-                let Some((i, line)) = lines.next() else {
-                    return Err(ReadError::Invalid {
-                        path: p(),
-                        what: format!("pcd ascii data: expected {n} points, found {}", out[0].len()),
-                    });
-                };
-                let toks: Vec<&str> = line.split_ascii_whitespace().collect();
-                if toks.len() != tokens_per_point {
-                    return Err(perr(
-                        header_lines + i + 1,
-                        format!("expected {tokens_per_point} values, found {}", toks.len()),
-                    ));
-                }
-                for k in 0..3 {
-                    let t = toks[tok_index[k]];
-                    let v: f64 = t.parse().map_err(|_| {
-                        perr(header_lines + i + 1, format!("`{}` is not a number", &t[..t.len().min(32)]))
-                    })?;
-                    out[k].push(v);
-                }
-            }
+    for o in &mut out {
+        o.reserve(n.min(text.len() / 2 + 1));
+    }
+    let header_lines = bytes[..data_start].iter().filter(|&&b| b == b'\n').count();
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    for _ in 0..n {
+        let Some((i, line)) = lines.next() else {
+            return Err(ReadError::Invalid {
+                path: p(),
+                what: format!("pcd ascii data: expected {n} points, found {}", out[0].len()),
+            });
+        };
+        let toks: Vec<&str> = line.split_ascii_whitespace().collect();
+        if toks.len() != tokens_per_point {
+            return Err(perr(
+                header_lines + i + 1,
+                format!("expected {tokens_per_point} values, found {}", toks.len()),
+            ));
         }
-        Format::PcdBinary => {
-            let need = n as u64 * record as u64;
-            if (data.len() as u64) < need {
-                return Err(ReadError::Truncated {
-                    path: p(),
-                    what: "pcd binary point data",
-                    expected: pos as u64 + need,
-                    found: bytes.len() as u64,
-                });
-            }
-            for k in 0..3 {
-                out[k] = (0..n).map(|i| read_float(data, i * record + xyz[k].offset, xyz[k].size)).collect();
-            }
-        }
-        _ => {
-            if data.len() < 8 {
-                return Err(ReadError::Truncated {
-                    path: p(),
-                    what: "pcd binary_compressed sizes",
-                    expected: pos as u64 + 8,
-                    found: bytes.len() as u64,
-                });
-            }
-            let compressed = u32::from_le_bytes([data[0], data[1], data[2], data[3]]) as usize;
-            let uncompressed = u32::from_le_bytes([data[4], data[5], data[6], data[7]]) as usize;
-            let payload = &data[8..];
-            if payload.len() < compressed {
-                return Err(ReadError::Truncated {
-                    path: p(),
-                    what: "pcd lzf payload",
-                    expected: (pos + 8 + compressed) as u64,
-                    found: bytes.len() as u64,
-                });
-            }
-            let need = n as u64 * record as u64;
-            if uncompressed as u64 != need {
-                return Err(ReadError::Invalid {
-                    path: p(),
-                    what: format!(
-                        "pcd binary_compressed: uncompressed size {uncompressed}, but {n} points × {record} bytes = {need}"
-                    ),
-                });
-            }
-            // LZF expands at most 132 bytes out per 2 bytes in; refuse impossible sizes before allocating.
-            if uncompressed as u64 > 66 * compressed as u64 + 64 {
-                return Err(ReadError::Lzf {
-                    path: p(),
-                    problem: format!("{compressed} compressed bytes cannot hold {uncompressed} bytes"),
-                });
-            }
-            let raw = lzf::decompress(&payload[..compressed], uncompressed)
-                .map_err(|problem| ReadError::Lzf { path: p(), problem })?;
-            for k in 0..3 {
-                let base = n * xyz[k].offset;
-                out[k] = (0..n).map(|i| read_float(&raw, base + i * xyz[k].size, xyz[k].size)).collect();
-            }
+        for k in 0..3 {
+            let t = toks[tok_index[k]];
+            let v: f64 = t.parse().map_err(|_| {
+                perr(header_lines + i + 1, format!("`{}` is not a number", &t[..t.len().min(32)]))
+            })?;
+            out[k].push(v);
         }
     }
-    let [xs, ys, zs] = out;
-    let valid: Vec<bool> =
-        (0..n).map(|i| xs[i].is_finite() && ys[i].is_finite() && zs[i].is_finite() && zs[i] > 0.0).collect();
-    let grid = |v: &[f64]| {
-        let data = v.iter().zip(&valid).map(|(&a, &ok)| if ok { a as f32 } else { f32::NAN }).collect();
-        Grid::from_vec(w as u32, h as u32, data).expect("n = w·h")
-    };
-    Ok(Cloud { x: grid(&xs), y: grid(&ys), z: grid(&zs), format, z_bits: 8 * xyz[2].size as u8 })
+    Ok(out)
+}
+
+/// x, y and z of the `n` points of `DATA binary_compressed` (two little-endian u32 sizes, then the
+/// LZF payload of the fields stored one after the other).
+fn decode_compressed(
+    bytes: &[u8],
+    data_start: usize,
+    record: usize,
+    xyz: [&Field; 3],
+    n: usize,
+    path: &Path,
+) -> Result<[Vec<f64>; 3], ReadError> {
+    let p = || path.to_path_buf();
+    let (pos, data) = (data_start, &bytes[data_start..]);
+    if data.len() < 8 {
+        return Err(ReadError::Truncated {
+            path: p(),
+            what: "pcd binary_compressed sizes",
+            expected: pos as u64 + 8,
+            found: bytes.len() as u64,
+        });
+    }
+    let compressed = u32::from_le_bytes([data[0], data[1], data[2], data[3]]) as usize;
+    let uncompressed = u32::from_le_bytes([data[4], data[5], data[6], data[7]]) as usize;
+    let payload = &data[8..];
+    if payload.len() < compressed {
+        return Err(ReadError::Truncated {
+            path: p(),
+            what: "pcd lzf payload",
+            expected: (pos + 8 + compressed) as u64,
+            found: bytes.len() as u64,
+        });
+    }
+    let need = n as u64 * record as u64;
+    if uncompressed as u64 != need {
+        return Err(ReadError::Invalid {
+            path: p(),
+            what: format!(
+                "pcd binary_compressed: uncompressed size {uncompressed}, but {n} points × {record} bytes = {need}"
+            ),
+        });
+    }
+    // LZF expands at most 132 bytes out per 2 bytes in; refuse impossible sizes before allocating.
+    if uncompressed as u64 > 66 * compressed as u64 + 64 {
+        return Err(ReadError::Lzf {
+            path: p(),
+            problem: format!("{compressed} compressed bytes cannot hold {uncompressed} bytes"),
+        });
+    }
+    let raw = lzf::decompress(&payload[..compressed], uncompressed)
+        .map_err(|problem| ReadError::Lzf { path: p(), problem })?;
+    Ok(xyz.map(|f| {
+        let base = n * f.offset;
+        (0..n).map(|i| read_float(&raw, base + i * f.size, f.size)).collect()
+    }))
 }
 
 fn read_float(buf: &[u8], at: usize, size: usize) -> f64 {

@@ -90,31 +90,7 @@ pub(crate) fn pgm_from_bytes_limited(
     let n = w * h;
     let data = &bytes[data_start..];
     let samples: Vec<u16> = if plain {
-        let text = std::str::from_utf8(data)
-            .map_err(|_| ReadError::Invalid { path: p(), what: "plain pgm data: not ascii".into() })?;
-        let mut v = Vec::with_capacity(n.min(text.len() / 2 + 1));
-        for tok in text.split_ascii_whitespace().take(n) {
-            let s: u64 = tok.parse().map_err(|_| ReadError::Invalid {
-                path: p(),
-                what: format!("plain pgm sample `{}`", &tok[..tok.len().min(20)]),
-            })?;
-            if s > maxval {
-                return Err(ReadError::Invalid {
-                    path: p(),
-                    what: format!("plain pgm sample {s} at index {} exceeds maxval {maxval}", v.len()),
-                });
-            }
-            v.push(s as u16);
-        }
-        if v.len() < n {
-            return Err(ReadError::Truncated {
-                path: p(),
-                what: "plain pgm samples",
-                expected: n as u64,
-                found: v.len() as u64,
-            });
-        }
-        v
+        plain_samples(data, n, maxval, path)?
     } else {
         let need = (n * bytes_per) as u64;
         if (data.len() as u64) < need {
@@ -161,6 +137,36 @@ pub(crate) fn pgm_from_bytes_limited(
         maxval: maxval as u16,
         bits: 8 * bytes_per as u8,
     })
+}
+
+/// The first `n` samples of a plain (P2) PGM's `data`, each at most `maxval`.
+fn plain_samples(data: &[u8], n: usize, maxval: u64, path: &Path) -> Result<Vec<u16>, ReadError> {
+    let p = || path.to_path_buf();
+    let text = std::str::from_utf8(data)
+        .map_err(|_| ReadError::Invalid { path: p(), what: "plain pgm data: not ascii".into() })?;
+    let mut v = Vec::with_capacity(n.min(text.len() / 2 + 1));
+    for tok in text.split_ascii_whitespace().take(n) {
+        let s: u64 = tok.parse().map_err(|_| ReadError::Invalid {
+            path: p(),
+            what: format!("plain pgm sample `{}`", &tok[..tok.len().min(20)]),
+        })?;
+        if s > maxval {
+            return Err(ReadError::Invalid {
+                path: p(),
+                what: format!("plain pgm sample {s} at index {} exceeds maxval {maxval}", v.len()),
+            });
+        }
+        v.push(s as u16);
+    }
+    if v.len() < n {
+        return Err(ReadError::Truncated {
+            path: p(),
+            what: "plain pgm samples",
+            expected: n as u64,
+            found: v.len() as u64,
+        });
+    }
+    Ok(v)
 }
 
 /// Reads a PGM file (see [`pgm_from_bytes`]).

@@ -622,7 +622,7 @@ fn grow_default<const N: usize>(
                     mom.add(point_of(&geo[p as usize]));
                 }
                 summed = queue.len();
-                if let Some(p) = mom.fit(|p| ctx.toward(p)) {
+                if let Some(p) = Plane::fit(&mom, |p| ctx.toward(p)) {
                     plane = p;
                     lim = max_res.max(rms_ratio * plane.mean_sq.max(0.0).sqrt());
                 }
@@ -738,7 +738,7 @@ fn fill(
     let planes: Vec<Option<Plane>> = stats
         .iter()
         .zip(used)
-        .map(|(s, &u)| if u && s.count >= 3 { s.mom.fit(|p| ctx.toward(p)) } else { None })
+        .map(|(s, &u)| if u && s.count >= 3 { Plane::fit(&s.mom, |p| ctx.toward(p)) } else { None })
         .collect();
     // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
     let free = |labels: &[u32], j: usize| labels[j] == 0 && geo[j][0].is_finite();
@@ -787,7 +787,7 @@ fn fill(
 /// The output record of final region `label`.
 fn region_of(ctx: &Ctx<'_>, label: u32, s: &Stats) -> Region {
     let o = ctx.origin;
-    let plane = s.mom.fit(|p| ctx.toward(p)).unwrap_or_else(|| {
+    let plane = Plane::fit(&s.mom, |p| ctx.toward(p)).unwrap_or_else(|| {
         let c = s.mom.centroid();
         let mut p = Plane::through(c, ctx.toward(c));
         p.mean_sq = p.mean_sq_distance(&s.mom);

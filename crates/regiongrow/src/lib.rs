@@ -54,6 +54,7 @@ mod plane;
 #[cfg(test)]
 mod testutil;
 
+use rangeimage::ParamError;
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 
 /// How many times `t_sigma` is doubled at most when fewer than `min_seeds` seeds were accepted.
@@ -110,8 +111,8 @@ pub struct Params {
     /// is ≤ this, in camera units.
     pub merge_max_residual: f32,
     /// Default mode: adjacent regions also merge, whatever their normals and mean K, when the one
-    /// plane fitted to both has an RMS distance ≤ `merge_max_residual` and ≤ this × the larger of
-    /// their own RMS distances (0 = off). Thin regions (stripes, strips of a staircase) have normals
+    /// plane fitted to both has an RMS distance ≤ `merge_max_residual` and ≤ this × the
+    /// pixel-weighted RMS distance of their own fits (0 = off). Thin regions (stripes, strips of a staircase) have normals
     /// the angle test cannot trust; the joint fit can.
     pub merge_joint_rms_ratio: f32,
     /// Regions with fewer pixels become unlabelled (0).
@@ -152,7 +153,7 @@ impl Default for Params {
             max_slant_deg: 80.0,
             refit_every_px: 16,
             merge_max_angle_deg: 10.0,
-            merge_max_residual: 2.0,
+            merge_max_residual: 4.0,
             merge_joint_rms_ratio: 1.2,
             min_region_px: 200,
             connectivity: 4,
@@ -182,53 +183,63 @@ impl Params {
     }
 
     /// Checks every value; the message names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         let nonneg = [
-            ("t_sigma", self.t_sigma),
-            ("t_m", self.t_m),
-            ("max_k_diff", self.max_k_diff),
-            ("max_curvedness", self.max_curvedness),
-            ("max_residual", self.max_residual),
-            ("residual_rms_ratio", self.residual_rms_ratio),
-            ("merge_max_residual", self.merge_max_residual),
-            ("merge_joint_rms_ratio", self.merge_joint_rms_ratio),
-            ("fill_max_residual", self.fill_max_residual),
+            ("regiongrow.t_sigma", self.t_sigma),
+            ("regiongrow.t_m", self.t_m),
+            ("regiongrow.max_k_diff", self.max_k_diff),
+            ("regiongrow.max_curvedness", self.max_curvedness),
+            ("regiongrow.max_residual", self.max_residual),
+            ("regiongrow.residual_rms_ratio", self.residual_rms_ratio),
+            ("regiongrow.merge_max_residual", self.merge_max_residual),
+            ("regiongrow.merge_joint_rms_ratio", self.merge_joint_rms_ratio),
+            ("regiongrow.fill_max_residual", self.fill_max_residual),
         ];
         for (name, v) in nonneg {
             if v.is_nan() || v < 0.0 {
-                return Err(format!("regiongrow.{name} must be a number ≥ 0, got {v}"));
+                return Err(ParamError::new(name, format!("must be a number ≥ 0, got {v}")));
             }
         }
-        for (name, v) in
-            [("max_angle_deg", self.max_angle_deg), ("merge_max_angle_deg", self.merge_max_angle_deg)]
-        {
+        for (name, v) in [
+            ("regiongrow.max_angle_deg", self.max_angle_deg),
+            ("regiongrow.merge_max_angle_deg", self.merge_max_angle_deg),
+        ] {
             if !(0.0..=180.0).contains(&v) {
-                return Err(format!("regiongrow.{name} must be in 0..=180, got {v}"));
+                return Err(ParamError::new(name, format!("must be in 0..=180, got {v}")));
             }
         }
         if !(0.0..=90.0).contains(&self.max_slant_deg) {
-            return Err(format!("regiongrow.max_slant_deg must be in 0..=90, got {}", self.max_slant_deg));
+            return Err(ParamError::new(
+                "regiongrow.max_slant_deg",
+                format!("must be in 0..=90, got {}", self.max_slant_deg),
+            ));
         }
         if self.max_seeds == 0 {
-            return Err("regiongrow.max_seeds must be ≥ 1".into());
+            return Err(ParamError::new("regiongrow.max_seeds", "must be ≥ 1"));
         }
         if self.min_seeds > self.max_seeds {
-            return Err(format!(
-                "regiongrow.min_seeds ({}) must be ≤ max_seeds ({})",
-                self.min_seeds, self.max_seeds
+            return Err(ParamError::new(
+                "regiongrow.min_seeds",
+                format!("({}) must be ≤ max_seeds ({})", self.min_seeds, self.max_seeds),
             ));
         }
         if self.seed_stride_px == 0 {
-            return Err("regiongrow.seed_stride_px must be ≥ 1".into());
+            return Err(ParamError::new("regiongrow.seed_stride_px", "must be ≥ 1"));
         }
         if self.seed_radius_px > 16 {
-            return Err(format!("regiongrow.seed_radius_px must be ≤ 16, got {}", self.seed_radius_px));
+            return Err(ParamError::new(
+                "regiongrow.seed_radius_px",
+                format!("must be ≤ 16, got {}", self.seed_radius_px),
+            ));
         }
         if self.refit_every_px == 0 {
-            return Err("regiongrow.refit_every_px must be ≥ 1".into());
+            return Err(ParamError::new("regiongrow.refit_every_px", "must be ≥ 1"));
         }
         if !matches!(self.connectivity, 4 | 8) {
-            return Err(format!("regiongrow.connectivity must be 4 or 8, got {}", self.connectivity));
+            return Err(ParamError::new(
+                "regiongrow.connectivity",
+                format!("must be 4 or 8, got {}", self.connectivity),
+            ));
         }
         Ok(())
     }
@@ -275,8 +286,9 @@ pub struct Segmentation {
 /// Segments `range` into regions by multi-seed region growing (see the crate docs).
 ///
 /// # Panics
-/// If any grid of `features` differs in size from `range`, or if `params` fail
-/// [`Params::validate`].
+/// If any grid of `features` differs in size from `range`; in debug builds also if `params` fail
+/// [`Params::validate`] (callers validate once, at the edge).
+#[must_use]
 pub fn grow(
     range: &RangeImage,
     features: &SurfaceFeatures,
@@ -285,9 +297,7 @@ pub fn grow(
     seed: u64,
 ) -> (Segmentation, Info) {
     let _s = tracing::info_span!("regiongrow", w = range.width(), h = range.height()).entered();
-    if let Err(e) = params.validate() {
-        panic!("regiongrow::grow: invalid params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "regiongrow::grow: invalid params");
     let need_sizes = [
         ("k", features.k.same_size(range)),
         ("k_std", features.k_std.same_size(range)),
@@ -313,6 +323,7 @@ pub fn grow(
 /// One-sided: between two regions only the upper/left pixel of each differing 4-neighbour pair is
 /// marked (the pixel whose right or lower neighbour has another non-zero label), giving a 1-pixel
 /// line; a labelled pixel next to label 0 is still marked (the 0 side cannot carry the border).
+#[must_use]
 pub fn borders(labels: &LabelImage, one_sided: bool) -> EdgeMap {
     let (w, h) = labels.dimensions();
     let l = labels.as_slice();

@@ -2,6 +2,7 @@
 
 use crate::plane::{Moments, Plane, dot};
 use crate::{Mode, Params};
+use rangeimage::union_find::find;
 
 /// Statistics of one region, accumulated in raster order (so they do not depend on label values).
 #[derive(Debug, Clone, Copy, Default)]
@@ -139,7 +140,7 @@ impl Criterion {
         let (pa, pb) = (pa?, pb?);
         let own = ((a.mom.n * pa.mean_sq + b.mom.n * pb.mean_sq) / (a.mom.n + b.mom.n)).max(0.0).sqrt();
         let limit = self.max_residual.min(self.joint_ratio * own);
-        let rms = a.mom.combined(&b.mom).fit(|_| pa.normal)?.mean_sq.max(0.0).sqrt();
+        let rms = Plane::fit(&a.mom.combined(&b.mom), |_| pa.normal)?.mean_sq.max(0.0).sqrt();
         (rms <= limit && limit > 0.0).then(|| 1.0 + rms / limit)
     }
 
@@ -202,73 +203,12 @@ pub(crate) fn merge<const N: usize>(
 ) -> Merged {
     let mut stats = region_stats(labels, max_label, pts, k);
     let crit = Criterion::new(params);
-    let fit = |s: &Stats| if crit.paper { None } else { s.mom.fit(toward) };
+    let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
     let mut planes: Vec<Option<Plane>> =
         stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }).collect();
     let mut parent: Vec<u32> = (0..=max_label).collect();
 
-    // Region adjacency graph from pixel pairs (right, down, and the two diagonals for 8-connectivity).
-    let height = labels.len().checked_div(width).unwrap_or(0);
-    let mut pairs: Vec<(u32, u32)> = Vec::new();
-    // Pairs of one pixel `x` of `row` with its right and lower (and lower diagonal) neighbours.
-    let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>| {
-        let mut push = |a: u32, b: u32| {
-            if a != 0 && b != 0 && a != b {
-                pairs.push((a.min(b), a.max(b)));
-            }
-        };
-        let a = row[x];
-        if a == 0 {
-            return;
-        }
-        if x + 1 < row.len() {
-            push(a, row[x + 1]);
-        }
-        if let Some(&b) = below.get(x) {
-            push(a, b);
-            if eight {
-                if x + 1 < row.len() {
-                    push(a, below[x + 1]);
-                }
-                if x > 0 {
-                    push(a, below[x - 1]);
-                }
-            }
-        }
-    };
-    const CHUNK: usize = 16;
-    for y in 0..height {
-        let row = &labels[y * width..(y + 1) * width];
-        let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
-        let mut x = 0;
-        if !eight && !below.is_empty() {
-            // Skip runs of 16 pixels equal to their right and lower neighbours (no pairs there).
-            while x + CHUNK < width {
-                let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
-                let diff = r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | (p ^ q) | (p ^ s));
-                if diff != 0 {
-                    for xx in x..x + CHUNK {
-                        scan(row, below, xx, &mut pairs);
-                    }
-                }
-                x += CHUNK;
-            }
-        }
-        for xx in x..width {
-            scan(row, below, xx, &mut pairs);
-        }
-    }
-    pairs.sort_unstable();
-    pairs.dedup();
-
-    fn find(parent: &mut [u32], mut a: u32) -> u32 {
-        while parent[a as usize] != a {
-            let g = parent[parent[a as usize] as usize];
-            parent[a as usize] = g;
-            a = g;
-        }
-        a
-    }
+    let mut pairs = adjacent_pairs(labels, width, eight);
 
     let mut n_merged = 0;
     let mut n_passes = 0;
@@ -330,6 +270,64 @@ pub(crate) fn merge<const N: usize>(
         }
     }
     Merged { stats, n_merged, n_passes }
+}
+
+/// The region adjacency graph of `labels` (rows of `width`): every pair `(a, b)`, `0 < a < b`, of
+/// labels on adjacent pixels (right, down, and the two lower diagonals with `eight`), sorted, once.
+fn adjacent_pairs(labels: &[u32], width: usize, eight: bool) -> Vec<(u32, u32)> {
+    let height = labels.len().checked_div(width).unwrap_or(0);
+    let mut pairs: Vec<(u32, u32)> = Vec::new();
+    // Pairs of one pixel `x` of `row` with its right and lower (and lower diagonal) neighbours.
+    let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>| {
+        let mut push = |a: u32, b: u32| {
+            if a != 0 && b != 0 && a != b {
+                pairs.push((a.min(b), a.max(b)));
+            }
+        };
+        let a = row[x];
+        if a == 0 {
+            return;
+        }
+        if x + 1 < row.len() {
+            push(a, row[x + 1]);
+        }
+        if let Some(&b) = below.get(x) {
+            push(a, b);
+            if eight {
+                if x + 1 < row.len() {
+                    push(a, below[x + 1]);
+                }
+                if x > 0 {
+                    push(a, below[x - 1]);
+                }
+            }
+        }
+    };
+    const CHUNK: usize = 16;
+    for y in 0..height {
+        let row = &labels[y * width..(y + 1) * width];
+        let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
+        let mut x = 0;
+        if !eight && !below.is_empty() {
+            // Skip runs of 16 pixels equal to their right and lower neighbours (no pairs there).
+            while x + CHUNK < width {
+                let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
+                let diff = r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | (p ^ q) | (p ^ s));
+                if diff != 0 {
+                    for xx in x..x + CHUNK {
+                        scan(row, below, xx, &mut pairs);
+                    }
+                }
+                x += CHUNK;
+            }
+        }
+        for xx in x..width {
+            scan(row, below, xx, &mut pairs);
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
 }
 
 #[cfg(test)]
@@ -471,7 +469,7 @@ mod tests {
     fn joint_fit_merges_thin_strips_of_one_plane_and_not_of_two() {
         let params = Params::default();
         let crit = Criterion::new(&params);
-        let fit = |s: &Stats| s.mom.fit(|_| [0.0, 0.0, 1.0]);
+        let fit = |s: &Stats| Plane::fit(&s.mom, |_| [0.0, 0.0, 1.0]);
         let plane = |x: f64, y: f64| 0.31 * x + 0.07 * y;
         // Two 3-pixel-wide strips of one plane, one above the other, whose mean K (noise of the
         // staircase in the curvature) differ beyond `t_m`: the pairwise test refuses them, the joint fit,

@@ -1,7 +1,7 @@
 //! Benchmarks of relax on a 512×512 scene of rectangle borders (C1) and a shifted, noisy copy (C2).
 
 use rand::{RngExt, SeedableRng};
-use rangeimage::{EdgeMap, Grid, RangeImage};
+use rangeimage::{EdgeMap, Grid};
 
 fn main() {
     divan::main();
@@ -39,25 +39,6 @@ fn case(side: u32) -> Case {
 fn relax(b: divan::Bencher, side: u32) {
     let c = case(side);
     let params = relax::Params::default();
-    b.bench(|| relax::relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 0));
-}
-
-/// `regions` mode as the pipeline runs it: region-growing labels (here the 8×8 cells) as guide.
-#[divan::bench(args = [512])]
-fn final_segmentation_regions(b: divan::Bencher, side: u32) {
-    let c = case(side);
-    let cell = side / 8;
-    let range: RangeImage = Grid::from_fn(side, side, |x, y| 100.0 + ((x / cell) * 3 + (y / cell)) as f32);
-    let guide = Grid::from_fn(side, side, |x, y| 1 + (x / cell) + 8 * (y / cell));
-    let params = relax::SegmentParams::default();
-    b.bench(|| relax::final_segmentation(&range, &rangeimage::Camera::ABW0, &c.c2, Some(&guide), &params));
-}
-
-#[divan::bench(args = [512])]
-fn final_segmentation(b: divan::Bencher, side: u32) {
-    let c = case(side);
-    let range: RangeImage =
-        Grid::from_fn(side, side, |x, y| 100.0 + ((x / (side / 8)) * 3 + (y / (side / 8))) as f32);
-    let params = relax::SegmentParams::default();
-    b.bench(|| relax::final_segmentation(&range, &rangeimage::Camera::ABW0, &c.c1, None, &params));
+    let input = relax::Input { c1: &c.c1, s1: &c.s1, c2: &c.c2, magnitude: &c.mag, valid: &c.valid };
+    b.bench(|| relax::relax(&input, &params, 0));
 }

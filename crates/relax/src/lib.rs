@@ -1,4 +1,4 @@
-//! Cooperative relaxation of two edge sets by simulated annealing, and the final segmentation.
+//! Cooperative relaxation of two edge sets by simulated annealing.
 //!
 //! docs/method.md §3.4. [`relax`] takes the region borders C1 (with a per-pixel strength s1, e.g. |K| or
 //! curvedness) and the Canny edges C2 (with the gradient magnitude), removes the points of each
@@ -51,13 +51,10 @@
 //! energy_before` always.
 
 mod anneal;
-mod segment;
-
-pub use segment::{SegmentMode, SegmentParams, final_segmentation};
 
 use anneal::{DistanceTerm, NONE, State};
 use rand::SeedableRng;
-use rangeimage::{EdgeMap, Grid, distance};
+use rangeimage::{EdgeMap, Grid, ParamError, distance};
 
 /// The `[relax]` table: pruning distance, energy weight and annealing schedule.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -108,30 +105,33 @@ impl Default for Params {
 
 impl Params {
     /// Checks the values; the error names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.t_d_px.is_finite() && (0.0..=64.0).contains(&self.t_d_px)) {
-            return Err(format!("relax.t_d_px must be in 0..=64, got {}", self.t_d_px));
-        }
-        if !(self.lambda.is_finite() && self.lambda >= 0.0) {
-            return Err(format!("relax.lambda must be finite and ≥ 0, got {}", self.lambda));
-        }
+    pub fn validate(&self) -> Result<(), ParamError> {
+        ParamError::in_range("relax.t_d_px", self.t_d_px, 0.0, 64.0)?;
+        ParamError::at_least("relax.lambda", self.lambda, 0.0)?;
         if !(self.t0.is_finite() && self.t0 >= 0.0) {
-            return Err(format!("relax.t0 must be finite and ≥ 0 (0 = automatic), got {}", self.t0));
+            return Err(ParamError::new(
+                "relax.t0",
+                format!("must be finite and ≥ 0 (0 = automatic), got {}", self.t0),
+            ));
         }
         if !(self.auto_t0_acceptance > 0.0 && self.auto_t0_acceptance < 1.0) {
-            return Err(format!(
-                "relax.auto_t0_acceptance must be in (0, 1), got {}",
-                self.auto_t0_acceptance
+            return Err(ParamError::new(
+                "relax.auto_t0_acceptance",
+                format!("must be in (0, 1), got {}", self.auto_t0_acceptance),
             ));
         }
         if !(self.cooling_delta > 0.0 && self.cooling_delta < 1.0) {
-            return Err(format!("relax.cooling_delta must be in (0, 1), got {}", self.cooling_delta));
+            return Err(ParamError::new(
+                "relax.cooling_delta",
+                format!("must be in (0, 1), got {}", self.cooling_delta),
+            ));
         }
-        if !(0.0..=1.0).contains(&self.min_acceptance) {
-            return Err(format!("relax.min_acceptance must be in 0..=1, got {}", self.min_acceptance));
-        }
+        ParamError::in_range("relax.min_acceptance", self.min_acceptance, 0.0, 1.0)?;
         if !(self.support_px.is_finite() && (0.0..=64.0).contains(&self.support_px)) {
-            return Err(format!("relax.support_px must be in 0..=64 (0 = no test), got {}", self.support_px));
+            return Err(ParamError::new(
+                "relax.support_px",
+                format!("must be in 0..=64 (0 = no test), got {}", self.support_px),
+            ));
         }
         Ok(())
     }
@@ -156,7 +156,7 @@ pub struct Relaxed {
 
 impl Relaxed {
     /// C1 ∪ C2 of the annealed state, before the support test: the edges the final
-    /// segmentation sees (it needs only one cue per border, see [`final_segmentation`]).
+    /// segmentation sees (it needs only one cue per border, see `finalseg::segment`).
     pub fn union(&self) -> EdgeMap {
         union(&self.c1, &self.c2)
     }
@@ -166,6 +166,7 @@ impl Relaxed {
 ///
 /// # Panics
 /// If the sizes differ.
+#[must_use]
 pub fn union(a: &EdgeMap, b: &EdgeMap) -> EdgeMap {
     assert!(a.same_size(b), "edge maps differ in size");
     let mut u = a.clone();
@@ -224,6 +225,7 @@ pub struct Energy {
 ///
 /// # Panics
 /// If the maps differ in size.
+#[must_use]
 pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
     assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
     let p2 = within(c2, c1, t_d_px);
@@ -341,6 +343,7 @@ fn external_sum(c1: &EdgeMap, s1: &Grid<f32>, c2: &EdgeMap, mag: &Grid<f32>) -> 
 ///
 /// # Panics
 /// If the grids differ in size.
+#[must_use]
 pub fn energy(
     c1: &EdgeMap,
     s1: &Grid<f32>,
@@ -374,21 +377,31 @@ pub fn energy(
     Energy { internal, external, total: internal + params.lambda * external }
 }
 
+/// What [`relax`] reconciles: the two edge sets of one image with their strengths, and the valid
+/// pixels (no point moves onto an invalid one). All grids have one size.
+#[derive(Debug, Clone, Copy)]
+pub struct Input<'a> {
+    /// C1, the region borders.
+    pub c1: &'a EdgeMap,
+    /// s1, the strength of each C1 point (|K| or curvedness; non-finite counts as 0).
+    pub s1: &'a Grid<f32>,
+    /// C2, the Canny edges.
+    pub c2: &'a EdgeMap,
+    /// |∇|, the strength of each C2 point (non-finite counts as 0).
+    pub magnitude: &'a Grid<f32>,
+    /// The valid pixels.
+    pub valid: &'a Grid<bool>,
+}
+
 /// Prunes and relaxes C1 (region borders, strength `s1`) and C2 (Canny edges, strength
 /// `magnitude`) by simulated annealing (docs/method.md §3.4 steps 1–3; details in the crate docs).
 /// Deterministic for a given `seed`; single-threaded.
 ///
 /// # Panics
-/// If the grids differ in size or `params` is invalid.
-pub fn relax(
-    c1: &EdgeMap,
-    s1: &Grid<f32>,
-    c2: &EdgeMap,
-    magnitude: &Grid<f32>,
-    valid: &Grid<bool>,
-    params: &Params,
-    seed: u64,
-) -> (Relaxed, Info) {
+/// If the grids differ in size; in debug builds also if `params` is invalid ([`Params::validate`]).
+#[must_use]
+pub fn relax(input: &Input<'_>, params: &Params, seed: u64) -> (Relaxed, Info) {
+    let Input { c1, s1, c2, magnitude, valid } = *input;
     let _s = tracing::info_span!("relax", w = c1.width(), h = c1.height()).entered();
     for (name, ok) in [
         ("s1", c1.same_size(s1)),
@@ -398,9 +411,7 @@ pub fn relax(
     ] {
         assert!(ok, "relax::relax: {name} differs in size from c1");
     }
-    if let Err(e) = params.validate() {
-        panic!("relax::relax: invalid params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "relax::relax: invalid params");
     let count = |m: &EdgeMap| m.as_slice().iter().filter(|&&b| b).count() as u32;
     let (p1, p2) = prune(c1, c2, params.t_d_px);
     let mut info =
@@ -481,6 +492,13 @@ mod tests {
         pub(crate) c2: EdgeMap,
         pub(crate) mag: Grid<f32>,
         pub(crate) valid: Grid<bool>,
+    }
+
+    impl Case {
+        /// The case as the input of [`relax`].
+        pub(crate) fn input(&self) -> Input<'_> {
+            Input { c1: &self.c1, s1: &self.s1, c2: &self.c2, magnitude: &self.mag, valid: &self.valid }
+        }
     }
 
     pub(crate) fn random_case(w: u32, h: u32, seed: u64) -> Case {
@@ -688,7 +706,7 @@ mod tests {
     fn relax_reports_consistent_energies_and_keeps_point_counts() {
         let c = random_case(80, 60, 11);
         let params = Params::default();
-        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 5);
+        let (r, info) = relax(&c.input(), &params, 5);
         let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
         assert_eq!(count(&r.c1), count(&p1));
         assert_eq!(count(&r.c2), count(&p2));
@@ -731,7 +749,8 @@ mod tests {
         let ones = Grid::new(w, h, 1.0f32);
         let valid = Grid::new(w, h, true);
         let params = Params { lambda: 0.0, max_sweeps: 200, min_acceptance: 0.0, ..Params::default() };
-        let (_, info) = relax(&c1, &ones, &c2, &ones, &valid, &params, 1);
+        let (_, info) =
+            relax(&Input { c1: &c1, s1: &ones, c2: &c2, magnitude: &ones, valid: &valid }, &params, 1);
         assert_relative_eq!(info.e_internal_before, 40.0 * (2.0 + 3.0));
         assert!(info.e_internal_after < 0.5 * info.e_internal_before, "{info:?}");
     }
@@ -740,7 +759,7 @@ mod tests {
     fn same_seed_same_output_at_any_thread_count() {
         let c = random_case(64, 64, 21);
         let params = Params::default();
-        let run = |seed| relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+        let run = |seed| relax(&c.input(), &params, seed);
         let (r0, i0) = run(9);
         for threads in [1, 2, 3] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
@@ -763,8 +782,11 @@ mod tests {
         let valid = Grid::new(w, h, true);
         let base = Params { t_d_px: 5.0, max_sweeps: 0, ..Params::default() };
         for (support, want_x) in [(2.0, vec![10, 11]), (4.0, vec![10, 11, 14]), (0.0, vec![10, 11, 14])] {
-            let (r, info) =
-                relax(&c1, &ones, &c2, &ones, &valid, &Params { support_px: support, ..base.clone() }, 0);
+            let (r, info) = relax(
+                &Input { c1: &c1, s1: &ones, c2: &c2, magnitude: &ones, valid: &valid },
+                &Params { support_px: support, ..base.clone() },
+                0,
+            );
             assert_eq!(r.c2, c2, "support {support}: the annealed C2 keeps every point");
             let want = Grid::from_fn(w, h, |x, _| want_x.contains(&x));
             assert_eq!(r.edges, want, "support {support}");
@@ -776,7 +798,7 @@ mod tests {
     fn zero_sweeps_only_prunes() {
         let c = random_case(50, 50, 4);
         let params = Params { max_sweeps: 0, ..Params::default() };
-        let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, 0);
+        let (r, info) = relax(&c.input(), &params, 0);
         let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
         assert_eq!((r.c1, r.c2), (p1, p2));
         assert_eq!(info.energy_after, info.energy_before);
@@ -787,7 +809,11 @@ mod tests {
     fn empty_input_is_fine() {
         let e = Grid::new(8, 6, false);
         let z = Grid::new(8, 6, 0.0f32);
-        let (r, info) = relax(&e, &z, &e, &z, &Grid::new(8, 6, true), &Params::default(), 0);
+        let (r, info) = relax(
+            &Input { c1: &e, s1: &z, c2: &e, magnitude: &z, valid: &Grid::new(8, 6, true) },
+            &Params::default(),
+            0,
+        );
         assert_eq!(count(&r.edges), 0);
         assert_eq!(info.energy_after, 0.0);
     }
@@ -818,7 +844,7 @@ mod tests {
             ) {
                 let c = random_case(w, h, seed);
                 let params = Params { t_d_px: t_d, lambda, t0, normalize, max_sweeps: 15, ..Params::default() };
-                let (r, info) = relax(&c.c1, &c.s1, &c.c2, &c.mag, &c.valid, &params, seed);
+                let (r, info) = relax(&c.input(), &params, seed);
                 prop_assert!(info.energy_after <= info.energy_before, "{:?}", info);
                 let (p1, p2) = prune(&c.c1, &c.c2, t_d);
                 let e = energy(&r.c1, &c.s1, &r.c2, &c.mag, &p1, &p2, &params);

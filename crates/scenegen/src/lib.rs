@@ -23,6 +23,7 @@ mod render;
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
+use rangeimage::ParamError;
 use rangeimage::{AbwCalibration, Camera, Grid, LabelImage};
 
 /// The `[scenegen]` parameters of a synthetic scene.
@@ -90,46 +91,55 @@ impl Default for Params {
 
 impl Params {
     /// Checks that every value is usable.
-    pub fn validate(&self) -> Result<(), String> {
-        let prob = |name: &str, p: f64| {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let prob = |name: &'static str, p: f64| {
             if (0.0..=1.0).contains(&p) {
                 Ok(())
             } else {
-                Err(format!("scenegen.{name} = {p} is not in 0..=1"))
+                Err(ParamError::new(name, format!("= {p} is not in 0..=1")))
             }
         };
         if !(16..=4096).contains(&self.width_px) || !(16..=4096).contains(&self.height_px) {
-            return Err(format!(
-                "scenegen image size {}×{} is not in 16..=4096",
-                self.width_px, self.height_px
+            return Err(ParamError::new(
+                "scenegen.width_px",
+                format!("and height_px must be in 16..=4096, got {}×{}", self.width_px, self.height_px),
             ));
         }
         if self.min_objects > self.max_objects || self.max_objects > 40 {
-            return Err(format!(
-                "scenegen objects {}..={} must be a non-empty range up to 40",
-                self.min_objects, self.max_objects
+            return Err(ParamError::new(
+                "scenegen.min_objects",
+                format!(
+                    "..=max_objects must be a non-empty range up to 40, got {}..={}",
+                    self.min_objects, self.max_objects
+                ),
             ));
         }
-        prob("stack_prob", self.stack_prob)?;
-        prob("touch_prob", self.touch_prob)?;
-        prob("tilt_prob", self.tilt_prob)?;
-        prob("dropout_rate", self.dropout_rate)?;
-        prob("mixed_pixel_prob", self.mixed_pixel_prob)?;
+        prob("scenegen.stack_prob", self.stack_prob)?;
+        prob("scenegen.touch_prob", self.touch_prob)?;
+        prob("scenegen.tilt_prob", self.tilt_prob)?;
+        prob("scenegen.dropout_rate", self.dropout_rate)?;
+        prob("scenegen.mixed_pixel_prob", self.mixed_pixel_prob)?;
         if self.stack_prob + self.touch_prob > 1.0 {
-            return Err("scenegen.stack_prob + touch_prob must not exceed 1".into());
+            return Err(ParamError::new("scenegen.stack_prob", "+ touch_prob must not exceed 1"));
         }
         if !(0.0..=20.0).contains(&self.noise_sigma_v) {
-            return Err(format!("scenegen.noise_sigma_v = {} is not in 0..=20", self.noise_sigma_v));
+            return Err(ParamError::new(
+                "scenegen.noise_sigma_v",
+                format!("= {} is not in 0..=20", self.noise_sigma_v),
+            ));
         }
         if self.jump_v.is_nan() || self.jump_v <= 0.0 {
-            return Err(format!("scenegen.jump_v = {} must be positive", self.jump_v));
+            return Err(ParamError::new("scenegen.jump_v", format!("= {} must be positive", self.jump_v)));
         }
         if !self.projector_baseline_mm.is_finite() {
-            return Err("scenegen.projector_baseline_mm must be finite".into());
+            return Err(ParamError::new("scenegen.projector_baseline_mm", "must be finite"));
         }
         let cal = self.calibration;
         if !(cal.scal > 0.0 && cal.offset > 0.0 && cal.f != 0.0 && cal.c > 0.0) {
-            return Err(format!("scenegen.calibration {cal:?} needs scal, offset, c > 0 and f ≠ 0"));
+            return Err(ParamError::new(
+                "scenegen.calibration",
+                format!("{cal:?} needs scal, offset, c > 0 and f ≠ 0"),
+            ));
         }
         Ok(())
     }
@@ -150,12 +160,11 @@ pub struct Scene {
 /// Generates the scene of `seed`: the same params and seed always give a bit-identical scene.
 ///
 /// # Panics
-/// If `params` fails [`Params::validate`].
+/// In debug builds, if `params` fails [`Params::validate`] (callers validate once, at the edge).
+#[must_use]
 pub fn generate(params: &Params, seed: u64) -> Scene {
     let _s = tracing::info_span!("scenegen", seed).entered();
-    if let Err(e) = params.validate() {
-        panic!("scenegen::generate: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "scenegen::generate");
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let layout = layout::random_layout(params, &mut rng);
     tracing::debug!(pieces = layout.pieces.len(), "layout");
@@ -174,6 +183,7 @@ pub const TEST_IMAGES: u32 = 30;
 /// Seeds are fixed per split and index. The calibration is the one ABW uses for that name
 /// ([`Camera::abw_for`]: calibration 1 for test images 0, 19, 21, 25, 27, 28, 29, otherwise 0), so
 /// a reader that picks the camera from the file name back-projects the scene exactly.
+#[must_use]
 pub fn benchmark_image(test_split: bool, index: u32) -> (Params, u64) {
     let calibration = match Camera::abw_for(test_split, index) {
         Camera::Abw(cal) => cal,

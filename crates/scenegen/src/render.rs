@@ -75,81 +75,122 @@ fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
 
 /// Renders `layout` into a scene with artefacts and ground truth.
 pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusPlus) -> Scene {
-    let (w, h) = (params.width_px, params.height_px);
-    let cal = params.calibration;
-    let cam = Cam {
-        scal: cal.scal,
-        offset: cal.offset,
-        z0: 255.0 / cal.scal + cal.offset,
-        f: cal.f.abs(),
-        c: cal.c,
-        cx: f64::from(w) / 2.0 - 1.0,
-        cy: f64::from(h) / 2.0 - 1.0,
-    };
-    let origin = [0.0, 0.0, cam.z0];
-    let projector = [params.projector_baseline_mm, 0.0, cam.z0];
+    let world = World::build(params, layout);
+    let hits = cast_primary(params, &world);
+    let v_clean = clean_values(params, &world, &hits);
+    let v_out = mixed_pixels(params, &world, &hits, &v_clean, rng);
+    let mut range = quantise(params, &v_out, rng);
+    dropouts(params, &mut range, rng);
+    ground_truth(params, &world, &hits, range)
+}
 
-    // World → camera: table point on the optical axis, forward and up directions.
-    let (se, ce) = crate::math::sin_cos(layout.elevation_rad);
-    let c0 = [0.0, 0.0, cam.z0 - layout.table_distance_mm];
-    let fwd = [0.0, se, -ce];
-    let up = [0.0, ce, se];
-    let to_cam = |p: V3| add(add(add(c0, [p[0], 0.0, 0.0]), scale(fwd, p[1])), scale(up, p[2]));
+/// The scene in the camera frame: the camera, the projector, every face plane `(n, e)` (table
+/// first, then the wall if any, then the pieces' faces), the pieces as convex solids, and each
+/// face's group of coincident planes.
+struct World {
+    cam: Cam,
+    origin: V3,
+    projector: V3,
+    faces: Vec<(V3, f64)>,
+    table_face: u32,
+    wall: Option<u32>,
+    solids: Vec<Solid>,
+    group: Vec<u32>,
+}
 
-    // Faces: every plane of every piece, then groups of coincident planes (one visible face).
-    let mut faces: Vec<(V3, f64)> = Vec::new();
-    let table_face = 0u32;
-    faces.push((up, -dot(up, c0)));
-    let wall = layout.wall_y_mm.map(|y| {
-        let n = scale(fwd, -1.0);
-        faces.push((n, -dot(n, to_cam([0.0, y, 0.0]))));
-        (faces.len() - 1) as u32
-    });
-    let mut solids = Vec::with_capacity(layout.pieces.len());
-    for piece in &layout.pieces {
-        let verts: Vec<V3> = piece.verts.iter().map(|&v| to_cam(v)).collect();
-        let centroid = scale(verts.iter().fold([0.0; 3], |a, &v| add(a, v)), 1.0 / verts.len() as f64);
-        let mut planes = Vec::with_capacity(piece.faces.len());
-        for f in &piece.faces {
-            // Newell's normal, oriented away from the centroid.
-            let mut n = [0.0; 3];
-            for i in 0..f.len() {
-                n = add(n, cross(verts[f[i]], verts[f[(i + 1) % f.len()]]));
+impl World {
+    /// Places the layout in front of the camera.
+    fn build(params: &Params, layout: &Layout) -> Self {
+        let (w, h) = (params.width_px, params.height_px);
+        let cal = params.calibration;
+        let cam = Cam {
+            scal: cal.scal,
+            offset: cal.offset,
+            z0: 255.0 / cal.scal + cal.offset,
+            f: cal.f.abs(),
+            c: cal.c,
+            cx: f64::from(w) / 2.0 - 1.0,
+            cy: f64::from(h) / 2.0 - 1.0,
+        };
+        let origin = [0.0, 0.0, cam.z0];
+        let projector = [params.projector_baseline_mm, 0.0, cam.z0];
+
+        // World → camera: table point on the optical axis, forward and up directions.
+        let (se, ce) = crate::math::sin_cos(layout.elevation_rad);
+        let c0 = [0.0, 0.0, cam.z0 - layout.table_distance_mm];
+        let fwd = [0.0, se, -ce];
+        let up = [0.0, ce, se];
+        let to_cam = |p: V3| add(add(add(c0, [p[0], 0.0, 0.0]), scale(fwd, p[1])), scale(up, p[2]));
+
+        // Faces: every plane of every piece, then groups of coincident planes (one visible face).
+        let mut faces: Vec<(V3, f64)> = Vec::new();
+        let table_face = 0u32;
+        faces.push((up, -dot(up, c0)));
+        let wall = layout.wall_y_mm.map(|y| {
+            let n = scale(fwd, -1.0);
+            faces.push((n, -dot(n, to_cam([0.0, y, 0.0]))));
+            (faces.len() - 1) as u32
+        });
+        let mut solids = Vec::with_capacity(layout.pieces.len());
+        for piece in &layout.pieces {
+            let verts: Vec<V3> = piece.verts.iter().map(|&v| to_cam(v)).collect();
+            let centroid = scale(verts.iter().fold([0.0; 3], |a, &v| add(a, v)), 1.0 / verts.len() as f64);
+            let mut planes = Vec::with_capacity(piece.faces.len());
+            for f in &piece.faces {
+                // Newell's normal, oriented away from the centroid.
+                let mut n = [0.0; 3];
+                for i in 0..f.len() {
+                    n = add(n, cross(verts[f[i]], verts[f[(i + 1) % f.len()]]));
+                }
+                let mut n = normalize(n);
+                let p0 = scale(f.iter().fold([0.0; 3], |a, &i| add(a, verts[i])), 1.0 / f.len() as f64);
+                if dot(n, sub(centroid, p0)) > 0.0 {
+                    n = scale(n, -1.0);
+                }
+                let e = -dot(n, p0);
+                faces.push((n, e));
+                planes.push((n, e, (faces.len() - 1) as u32));
             }
-            let mut n = normalize(n);
-            let p0 = scale(f.iter().fold([0.0; 3], |a, &i| add(a, verts[i])), 1.0 / f.len() as f64);
-            if dot(n, sub(centroid, p0)) > 0.0 {
-                n = scale(n, -1.0);
+            let (mut x0, mut x1, mut y0, mut y1) =
+                (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+            let mut pb = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+            for &v in &verts {
+                let (px, py) = cam.project(v);
+                (x0, x1, y0, y1) = (x0.min(px), x1.max(px), y0.min(py), y1.max(py));
+                let q = sub(v, projector);
+                let (u, ww) = (q[0] / -q[2], q[1] / -q[2]);
+                pb = [pb[0].min(u), pb[1].max(u), pb[2].min(ww), pb[3].max(ww)];
             }
-            let e = -dot(n, p0);
-            faces.push((n, e));
-            planes.push((n, e, (faces.len() - 1) as u32));
+            let pixel_box = (x1 >= 0.0 && y1 >= 0.0 && x0 <= f64::from(w - 1) && y0 <= f64::from(h - 1))
+                .then(|| {
+                    [
+                        (x0.floor() - 1.0).max(0.0) as u32,
+                        (x1.ceil() + 1.0).min(f64::from(w - 1)) as u32,
+                        (y0.floor() - 1.0).max(0.0) as u32,
+                        (y1.ceil() + 1.0).min(f64::from(h - 1)) as u32,
+                    ]
+                });
+            let m = 1e-6;
+            solids.push(Solid { planes, pixel_box, proj_box: [pb[0] - m, pb[1] + m, pb[2] - m, pb[3] + m] });
         }
-        let (mut x0, mut x1, mut y0, mut y1) =
-            (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        let mut pb = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
-        for &v in &verts {
-            let (px, py) = cam.project(v);
-            (x0, x1, y0, y1) = (x0.min(px), x1.max(px), y0.min(py), y1.max(py));
-            let q = sub(v, projector);
-            let (u, ww) = (q[0] / -q[2], q[1] / -q[2]);
-            pb = [pb[0].min(u), pb[1].max(u), pb[2].min(ww), pb[3].max(ww)];
-        }
-        let pixel_box =
-            (x1 >= 0.0 && y1 >= 0.0 && x0 <= f64::from(w - 1) && y0 <= f64::from(h - 1)).then(|| {
-                [
-                    (x0.floor() - 1.0).max(0.0) as u32,
-                    (x1.ceil() + 1.0).min(f64::from(w - 1)) as u32,
-                    (y0.floor() - 1.0).max(0.0) as u32,
-                    (y1.ceil() + 1.0).min(f64::from(h - 1)) as u32,
-                ]
-            });
-        let m = 1e-6;
-        solids.push(Solid { planes, pixel_box, proj_box: [pb[0] - m, pb[1] + m, pb[2] - m, pb[3] + m] });
+        let group = plane_groups(&faces);
+        Self { cam, origin, projector, faces, table_face, wall, solids, group }
     }
-    let group = plane_groups(&faces);
+}
 
-    // Primary rays: table and wall everywhere, pieces inside their pixel boxes (z-buffer).
+/// Where each pixel's primary ray first hits: its depth along the optical axis, the face hit
+/// (`NO_FACE` for none) and the solid hit (`u32::MAX` for the table or the wall).
+struct Hits {
+    depth: Vec<f64>,
+    face: Vec<u32>,
+    solid_of: Vec<u32>,
+}
+
+/// Primary rays: table and wall everywhere, pieces inside their pixel boxes (z-buffer).
+fn cast_primary(params: &Params, world: &World) -> Hits {
+    let (w, h) = (params.width_px, params.height_px);
+    let World { cam, origin, faces, table_face, wall, solids, .. } = world;
+    let (origin, table_face, wall) = (*origin, *table_face, *wall);
     let n = w as usize * h as usize;
     let mut depth = vec![f64::INFINITY; n];
     let mut face = vec![NO_FACE; n];
@@ -188,8 +229,16 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
             }
         }
     }
+    Hits { depth, face, solid_of }
+}
 
-    // Clean range values; out of the sensor's range and projector shadows are no data.
+/// Clean range values; out of the sensor's range and projector shadows are no data (NaN).
+fn clean_values(params: &Params, world: &World, hits: &Hits) -> Vec<f64> {
+    let (w, h) = (params.width_px, params.height_px);
+    let n = w as usize * h as usize;
+    let World { cam, origin, projector, faces, solids, .. } = world;
+    let (origin, projector) = (*origin, *projector);
+    let Hits { depth, face, solid_of } = hits;
     let mut v_clean = vec![f64::NAN; n];
     for y in 0..h {
         for x in 0..w {
@@ -203,16 +252,29 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
             }
             if params.shadows {
                 let p = add(origin, scale(cam.dir(f64::from(x), f64::from(y)), depth[i]));
-                if shadowed(p, face[i], solid_of[i], &faces, &solids, projector) {
+                if shadowed(p, face[i], solid_of[i], faces, solids, projector) {
                     continue;
                 }
             }
             v_clean[i] = v;
         }
     }
+    v_clean
+}
 
-    // Mixed pixels at jump edges: a value between the two surfaces; the label stays the hit face's.
-    let mut v_out = v_clean.clone();
+/// Mixed pixels at jump edges: a value between the two surfaces; the label stays the hit face's.
+fn mixed_pixels(
+    params: &Params,
+    world: &World,
+    hits: &Hits,
+    v_clean: &[f64],
+    rng: &mut Xoshiro256PlusPlus,
+) -> Vec<f64> {
+    let (w, h) = (params.width_px, params.height_px);
+    let World { cam, origin, faces, .. } = world;
+    let origin = *origin;
+    let face = &hits.face;
+    let mut v_out = v_clean.to_vec();
     if params.mixed_pixel_prob > 0.0 {
         for y in 0..h {
             for x in 0..w {
@@ -257,8 +319,12 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
             }
         }
     }
+    v_out
+}
 
-    // Depth noise and 8-bit quantisation.
+/// Depth noise and 8-bit quantisation (0 = no data).
+fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus) -> Grid<u8> {
+    let (w, h) = (params.width_px, params.height_px);
     let mut range = Grid::new(w, h, 0u8);
     for (i, px) in range.as_mut_slice().iter_mut().enumerate() {
         let g = gauss(rng);
@@ -266,8 +332,13 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
             *px = (v_out[i] + params.noise_sigma_v * g).round().clamp(1.0, 255.0) as u8;
         }
     }
+    range
+}
 
-    // Dropouts: small round blobs of no data.
+/// Dropouts: small round blobs of no data.
+fn dropouts(params: &Params, range: &mut Grid<u8>, rng: &mut Xoshiro256PlusPlus) {
+    let (w, h) = (params.width_px, params.height_px);
+    let n = w as usize * h as usize;
     let mean_area = 6.0;
     let blobs = (params.dropout_rate * n as f64 / mean_area).round() as u32;
     for _ in 0..blobs {
@@ -285,8 +356,13 @@ pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusP
             }
         }
     }
+}
 
-    // Ground truth: connected pieces of one plane, on valid pixels (mixed ones included).
+/// Ground truth: connected pieces of one plane, on valid pixels (mixed ones included), and the
+/// angles between adjacent pieces.
+fn ground_truth(params: &Params, world: &World, hits: &Hits, range: Grid<u8>) -> Scene {
+    let (w, h) = (params.width_px, params.height_px);
+    let (faces, group, face) = (&world.faces, &world.group, &hits.face);
     let key = Grid::from_fn(w, h, |x, y| {
         let i = y as usize * w as usize + x as usize;
         if range[(x, y)] == 0 || face[i] == NO_FACE { u32::MAX } else { group[face[i] as usize] }

@@ -13,6 +13,7 @@
 mod canny;
 mod gradient;
 
+use rangeimage::ParamError;
 use rangeimage::{EdgeMap, Grid, PlaneMap, RangeImage};
 
 /// Largest Gaussian kernel side `kernel_px` accepted (the smoothing passes keep this many row slices on the stack).
@@ -78,31 +79,46 @@ impl Default for Params {
 
 impl Params {
     /// Checks the values; the message names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if !(self.sigma_px.is_finite() && self.sigma_px > 0.0) {
-            return Err(format!("vcanny.sigma_px must be positive, got {}", self.sigma_px));
+            return Err(ParamError::new(
+                "vcanny.sigma_px",
+                format!("must be positive, got {}", self.sigma_px),
+            ));
         }
         if self.kernel_px == 0 || self.kernel_px.is_multiple_of(2) || self.kernel_px as usize > MAX_KERNEL_PX
         {
-            return Err(format!(
-                "vcanny.kernel_px must be odd and in 1..={MAX_KERNEL_PX}, got {}",
-                self.kernel_px
+            return Err(ParamError::new(
+                "vcanny.kernel_px",
+                format!("must be odd and in 1..={MAX_KERNEL_PX}, got {}", self.kernel_px),
             ));
         }
         if self.weights.iter().any(|w| !(w.is_finite() && *w >= 0.0))
             || self.weights.iter().all(|&w| w == 0.0)
         {
-            return Err(format!("vcanny.weights must be finite, ≥ 0 and not all 0, got {:?}", self.weights));
+            return Err(ParamError::new(
+                "vcanny.weights",
+                format!("must be finite, ≥ 0 and not all 0, got {:?}", self.weights),
+            ));
         }
         let t = &self.thresholds;
         if !(t.low.is_finite() && t.high.is_finite() && t.low >= 0.0 && t.low <= t.high) {
-            return Err(format!("vcanny.thresholds need 0 ≤ low ≤ high, got low {} high {}", t.low, t.high));
+            return Err(ParamError::new(
+                "vcanny.thresholds",
+                format!("need 0 ≤ low ≤ high, got low {} high {}", t.low, t.high),
+            ));
         }
         if t.mode == ThresholdMode::Quantile && t.high > 1.0 {
-            return Err(format!("vcanny.thresholds quantiles must be in [0, 1], got high {}", t.high));
+            return Err(ParamError::new(
+                "vcanny.thresholds",
+                format!("quantiles must be in [0, 1], got high {}", t.high),
+            ));
         }
         if !(t.noise_floor.is_finite() && t.noise_floor > 0.0) {
-            return Err(format!("vcanny.thresholds.noise_floor must be positive, got {}", t.noise_floor));
+            return Err(ParamError::new(
+                "vcanny.thresholds.noise_floor",
+                format!("must be positive, got {}", t.noise_floor),
+            ));
         }
         Ok(())
     }
@@ -122,7 +138,8 @@ pub struct Edges {
 /// A pixel takes part if `valid` is true and every channel is finite there.
 ///
 /// # Panics
-/// If the grids differ in size, `channels` is empty or its length differs from `weights`, or `params` is invalid.
+/// If the grids differ in size, `channels` is empty or its length differs from `weights`; in debug builds also if `params` is invalid.
+#[must_use]
 pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, params: &Params) -> Edges {
     let _s = tracing::info_span!("vcanny", w = valid.width(), h = valid.height(), channels = channels.len())
         .entered();
@@ -134,7 +151,8 @@ pub fn detect(channels: &[&Grid<f32>], weights: &[f32], valid: &Grid<bool>, para
 /// Canny on the plane parameters `[a, b, c]` with the weights of `params`.
 ///
 /// # Panics
-/// If `plane` and `valid` differ in size or `params` is invalid.
+/// If `plane` and `valid` differ in size; in debug builds also if `params` is invalid.
+#[must_use]
 pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> Edges {
     let _s = tracing::info_span!("vcanny", w = valid.width(), h = valid.height(), channels = 3).entered();
     assert!(plane.same_size(valid), "plane map and mask differ in size");
@@ -144,7 +162,8 @@ pub fn detect_planes(plane: &PlaneMap, valid: &Grid<bool>, params: &Params) -> E
 /// Canny on the raw range image (the baseline of the paper's Table I); `params.weights` is not used.
 ///
 /// # Panics
-/// If `params` is invalid.
+/// In debug builds, if `params` is invalid ([`Params::validate`]).
+#[must_use]
 pub fn detect_raw(range: &RangeImage, params: &Params) -> Edges {
     let _s = tracing::info_span!("vcanny", w = range.width(), h = range.height(), channels = 1).entered();
     run(&gradient::Input::Stack(&[range]), &[1.0], None, range.dimensions(), params)
@@ -158,9 +177,7 @@ fn run(
     (wu, hu): (u32, u32),
     params: &Params,
 ) -> Edges {
-    if let Err(e) = params.validate() {
-        panic!("invalid vcanny params: {e}");
-    }
+    debug_assert_eq!(params.validate(), Ok(()), "invalid vcanny params");
     assert_eq!(input.len(), weights.len(), "one weight per channel");
     assert!(
         weights.iter().all(|w| w.is_finite() && *w >= 0.0),

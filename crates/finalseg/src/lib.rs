@@ -1,0 +1,550 @@
+//! The final segmentation (docs/method.md §3.4 step 4): regions from the relaxed edge map,
+//! optionally guided by the region-growing labels and merged where the relaxed edges do not
+//! support a border. One entry point, [`segment`]; its steps live in one module each
+//! (`components`, `fill`, `merge`; the region planes in `plane`).
+
+mod components;
+mod fill;
+mod merge;
+mod params;
+mod plane;
+
+pub use params::{Mode, Params};
+
+use components::{components, count_labels};
+use plane::{Plane, fit_plane};
+use planefit::Moments;
+use rangeimage::union_find::find;
+use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
+
+/// Labels the image from the final edge map `edges` (C = C1 ∪ C2).
+///
+/// 1. Core pixels: valid pixels farther than `gap_close_px` from every edge pixel (with 0, all
+///    non-edge valid pixels); in `regions` mode with `unlabelled_core = false` also labelled
+///    (≠ 0) in `regions`.
+/// 2. 4-connected components of core pixels; in `regions` mode two neighbours connect only if
+///    their region-growing labels are equal, so no component crosses a region-growing border
+///    (but edges inside a region may split it). Components under `min_region_px` are dropped.
+/// 3. Every remaining valid unlabelled pixel (edge pixels, the margin around them, dropped
+///    components, pixels region growing left unlabelled) is given to the 8-adjacent region
+///    whose plane fits its 3D point best, ring by ring outward from the regions (each ring
+///    decided from the previous rings only, ties to the smaller label, so the result does not
+///    depend on visiting order). A pixel farther than `fill_max_residual` (if > 0) from that
+///    best plane when its ring comes stays 0 and passes the fill on no further. Valid pixels not
+///    connected to any region stay 0; NaN pixels always stay 0.
+/// 4. `regions` mode only: adjacent regions whose border is supported by C on less than
+///    `min_border_support` of its pixels (a border pixel is supported if it is within 1 px,
+///    8-neighbourhood, of an edge pixel) and whose planes agree (normal angle ≤
+///    `merge_max_angle_deg`, RMS distance of each one's core points to the other's plane ≤
+///    `merge_max_residual`) are merged: union-find over the adjacent pairs in sorted order,
+///    planes refitted on merge, passes repeated until none merges (support is per original
+///    pair; the plane test uses the current merged groups). With `merge_within_region`, two
+///    adjacent pieces of one region-growing region (label ≠ 0) are candidates whatever the
+///    support, if their planes agree as above and, for a supported border, each piece's RMS
+///    distance to the other's plane is at most `within_max_rms_ratio` times its own RMS: edges
+///    inside a face split it only where the geometry changes.
+///
+/// `regions = None` makes `regions` mode behave as `components`.
+///
+/// Labels are consecutive from 1 in raster order of first appearance. Each [`Region`] carries
+/// its final size, and the plane (unit normal toward the sensor, offset, RMS residual) fitted in
+/// 3D through `camera.point` on its core pixels only (edge pixels include mixed pixels at jumps,
+/// which would bias the fit). `mean_k` is `NaN`: curvature is not an input here.
+///
+/// # Panics
+#[must_use]
+pub fn segment(
+    range: &RangeImage,
+    camera: &Camera,
+    edges: &EdgeMap,
+    regions: Option<&LabelImage>,
+    params: &Params,
+) -> (LabelImage, Vec<Region>) {
+    let _s = tracing::info_span!("final_segmentation", w = range.width(), h = range.height()).entered();
+    assert!(range.same_size(edges), "finalseg::segment: range and edges differ in size");
+    if let Some(l) = regions {
+        assert!(range.same_size(l), "finalseg::segment: range and regions differ in size");
+    }
+    let guide = match params.mode {
+        Mode::Regions => regions.map(|l| l.as_slice()),
+        Mode::Components => None,
+    };
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let scene = Scene { range: range.as_slice(), w, h, camera };
+
+    // 1. 4-connected components of core pixels (two neighbours connect only if their guide
+    //    labels agree), numbered in raster order of their first pixel.
+    let core = core_pixels(range, edges, guide, params);
+    let (comp, sizes) = components(&core, guide, w, h);
+    drop(core);
+
+    // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
+    let mut pieces = Pieces::fit(&scene, comp, &sizes, guide, params.min_region_px);
+
+    // 3. Fill unlabelled valid pixels ring by ring.
+    let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
+    fill::fill(&scene, &mut pieces.comp, &pieces.planes, limit);
+
+    // 4. Merge adjacent regions over unsupported borders with agreeing planes.
+    let mut parent: Vec<u32> = (0..=pieces.planes.len() as u32).collect();
+    if guide.is_some() {
+        merge::merge_unsupported(&scene, edges, &mut pieces, &mut parent, params);
+    }
+
+    // 5. Consecutive labels in raster order; region statistics.
+    pieces.relabel(&mut parent, w, h)
+}
+
+/// The read-only inputs every step reads: the range values, the image size and the camera.
+#[derive(Clone, Copy)]
+struct Scene<'a> {
+    range: &'a [f32],
+    w: usize,
+    h: usize,
+    camera: &'a Camera,
+}
+
+impl Scene<'_> {
+    /// The 3D point of pixel (x, y); `None` where the range value is not valid.
+    #[inline]
+    fn point(&self, x: usize, y: usize) -> Option<[f64; 3]> {
+        self.camera.point(x as f64, y as f64, f64::from(self.range[y * self.w + x]))
+    }
+}
+
+/// Core pixels: valid, not an edge pixel and not within `gap_close_px` of one (and, in `regions`
+/// mode with `unlabelled_core = false`, labelled in `guide`).
+fn core_pixels(range: &RangeImage, edges: &EdgeMap, guide: Option<&[u32]>, params: &Params) -> Vec<bool> {
+    let mut core: Vec<bool> = if params.gap_close_px > 0.0 {
+        rangeimage::distance::within(edges, params.gap_close_px).into_vec()
+    } else {
+        edges.as_slice().to_vec()
+    };
+    for (c, &v) in core.iter_mut().zip(range.as_slice()) {
+        *c = !*c & v.is_finite();
+    }
+    if let (Some(g), false) = (guide, params.unlabelled_core) {
+        for (c, &l) in core.iter_mut().zip(g) {
+            *c &= l != 0;
+        }
+    }
+    core
+}
+
+/// The regions while they form (steps 2–5): a component per pixel (0 = none; label `l` indexes
+/// the per-component vectors at `l − 1`), and per component its region-growing label (0 without a
+/// guide), the moments of its core points and its plane (`None` for dropped components).
+struct Pieces {
+    comp: Vec<u32>,
+    guide: Vec<u32>,
+    moments: Vec<Moments>,
+    planes: Vec<Option<Plane>>,
+}
+
+impl Pieces {
+    /// Step 2: drops the components of `comp` under `min_region_px` pixels and fits a plane to
+    /// every kept one.
+    fn fit(
+        scene: &Scene<'_>,
+        mut comp: Vec<u32>,
+        sizes: &[u32],
+        guide: Option<&[u32]>,
+        min_region_px: u32,
+    ) -> Self {
+        let (w, h) = (scene.w, scene.h);
+        let keep: Vec<bool> = sizes.iter().map(|&n| u64::from(n) >= u64::from(min_region_px)).collect();
+        // The region-growing label of each component (all its pixels share one; 0 without a guide).
+        let mut comp_guide = vec![0u32; sizes.len()];
+        if let Some(g) = guide {
+            for (&c, &l) in comp.iter().zip(g) {
+                if c != 0 {
+                    comp_guide[c as usize - 1] = l;
+                }
+            }
+        }
+        let mut moments: Vec<Moments> = vec![Moments::default(); sizes.len()];
+        // Runs of one component are summed in a local copy of its moments (the same additions in
+        // the same order, but in registers).
+        let mut cur = 0u32;
+        let mut acc = Moments::default();
+        for y in 0..h {
+            for (x, c) in comp[y * w..(y + 1) * w].iter_mut().enumerate() {
+                if *c == 0 {
+                    continue;
+                }
+                if !keep[*c as usize - 1] {
+                    *c = 0;
+                } else if let Some(p) = scene.point(x, y) {
+                    if *c != cur {
+                        if cur != 0 {
+                            moments[cur as usize - 1] = acc;
+                        }
+                        cur = *c;
+                        acc = moments[cur as usize - 1];
+                    }
+                    acc.add(p);
+                }
+            }
+        }
+        if cur != 0 {
+            moments[cur as usize - 1] = acc;
+        }
+        let planes = moments.iter().zip(&keep).map(|(m, &k)| k.then(|| fit_plane(m, scene.camera))).collect();
+        Self { comp, guide: comp_guide, moments, planes }
+    }
+
+    /// Step 5: the merged groups of `parent` numbered consecutively in raster order of their first
+    /// pixel, and their regions.
+    fn relabel(self, parent: &mut [u32], w: usize, h: usize) -> (LabelImage, Vec<Region>) {
+        let planes = self.planes;
+        let root: Vec<u32> = (0..=planes.len() as u32).map(|c| find(parent, c)).collect();
+        let mut map = vec![0u32; planes.len() + 1];
+        let mut order: Vec<u32> = Vec::new();
+        let mut labels = self.comp;
+        for l in &mut labels {
+            if *l == 0 {
+                continue;
+            }
+            let c = root[*l as usize] as usize;
+            if map[c] == 0 {
+                order.push(c as u32);
+                map[c] = order.len() as u32;
+            }
+            *l = map[c];
+        }
+        let mut sizes = vec![0u32; order.len()];
+        count_labels(&labels, &mut sizes);
+        let regions = order
+            .iter()
+            .zip(&sizes)
+            .enumerate()
+            .map(|(k, (&c, &size_px))| {
+                let plane = planes[c as usize - 1].expect("kept region");
+                Region {
+                    label: k as u32 + 1,
+                    size_px,
+                    mean_k: f32::NAN,
+                    normal: plane.normal.map(|v| v as f32),
+                    offset: plane.offset as f32,
+                    rms_residual: plane.rms as f32,
+                }
+            })
+            .collect();
+        let labels = Grid::from_vec(w as u32, h as u32, labels).expect("size matches");
+        (labels, regions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    /// 40×30: left plane v = 100 + 0.5x (x ≤ 19), right plane v = 200 − 2x (x ≥ 20), a two-pixel
+    /// edge line at x = 19, 20, and a NaN block in the top-left corner.
+    fn two_planes() -> (RangeImage, EdgeMap) {
+        let range = Grid::from_fn(40, 30, |x, y| {
+            if x < 3 && y < 4 {
+                f32::NAN
+            } else if x <= 19 {
+                100.0 + 0.5 * x as f32
+            } else {
+                200.0 - 2.0 * x as f32
+            }
+        });
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        (range, edges)
+    }
+
+    /// A 4×4 patch 20 units in front of a flat 40×30 plane, all of it edge pixels: without a fill
+    /// limit the plane's region swallows it, with `fill_max_residual = 3` it stays 0.
+    #[test]
+    fn fill_limit_leaves_off_plane_pixels_unlabelled() {
+        let patch = |x: u32, y: u32| (5..9).contains(&x) && (5..9).contains(&y);
+        let range = Grid::from_fn(40, 30, |x, y| if patch(x, y) { 80.0 } else { 100.0 });
+        let edges = Grid::from_fn(40, 30, patch);
+        let params = Params { min_region_px: 10, gap_close_px: 0.0, ..Params::default() };
+        for (limit, want) in [(0.0, 1u32), (3.0, 0)] {
+            let p = Params { fill_max_residual: limit, ..params.clone() };
+            let (labels, regions) = segment(&range, &Camera::Grid, &edges, None, &p);
+            assert_eq!(regions.len(), 1);
+            assert_eq!(labels[(6, 6)], want, "limit {limit}");
+            assert_eq!(labels[(20, 20)], 1);
+        }
+    }
+
+    /// `fill_rms_ratio`: a rough plane (a ±2-unit checker ripple, RMS 2) keeps a pixel 4 units off it that the
+    /// absolute limit of 3 alone would leave unlabelled; a pixel 20 units off stays 0 either way.
+    #[test]
+    fn fill_limit_follows_the_region_scatter() {
+        let hole = |x: u32, y: u32| (5..7).contains(&x) && (5..7).contains(&y);
+        let far = |x: u32, y: u32| (30..32).contains(&x) && (20..22).contains(&y);
+        let range = Grid::from_fn(40, 30, |x, y| {
+            let ripple = if (x + y) % 2 == 0 { 2.0 } else { -2.0 };
+            if hole(x, y) {
+                104.0
+            } else if far(x, y) {
+                120.0
+            } else {
+                100.0 + ripple
+            }
+        });
+        let edges = Grid::from_fn(40, 30, |x, y| hole(x, y) || far(x, y));
+        let base = Params { min_region_px: 10, fill_max_residual: 3.0, ..Params::default() };
+        for (ratio, want) in [(0.0, 0u32), (3.0, 1)] {
+            let p = Params { fill_rms_ratio: ratio, ..base.clone() };
+            let (labels, _) = segment(&range, &Camera::Grid, &edges, None, &p);
+            assert_eq!(labels[(5, 5)], want, "ratio {ratio}");
+            assert_eq!(labels[(30, 20)], 0, "ratio {ratio}");
+        }
+    }
+
+    #[test]
+    fn two_planes_split_at_the_edge_line() {
+        for gap_close_px in [0.0, 2.0] {
+            two_planes_split(gap_close_px);
+        }
+    }
+
+    #[test]
+    fn gap_closing_separates_regions_across_a_broken_contour() {
+        let (range, mut edges) = two_planes();
+        for y in 10..12 {
+            edges[(19, y)] = false;
+            edges[(20, y)] = false;
+        }
+        let open = Params { gap_close_px: 0.0, ..Params::default() };
+        let (_, regions) = segment(&range, &Camera::Grid, &edges, None, &open);
+        assert_eq!(regions.len(), 1, "without gap closing the two faces leak into one component");
+        let closing = Params { gap_close_px: 2.0, ..Params::default() };
+        let (labels, regions) = segment(&range, &Camera::Grid, &edges, None, &closing);
+        assert_eq!(regions.len(), 2);
+        for y in 0..30 {
+            assert_eq!(labels[(10, y)], 1);
+            assert_eq!(labels[(30, y)], 2);
+            assert_eq!(labels[(19, y)], 1, "gap pixel (19, {y}) fits the left plane");
+            assert_eq!(labels[(20, y)], 2, "gap pixel (20, {y}) fits the right plane");
+        }
+    }
+
+    fn two_planes_split(gap_close_px: f64) {
+        let (range, edges) = two_planes();
+        let params = Params { gap_close_px, ..Params::default() };
+        let (labels, regions) = segment(&range, &Camera::Grid, &edges, None, &params);
+        assert_eq!(regions.len(), 2);
+        for (x, y, &l) in labels.enumerate() {
+            let want = if range[(x, y)].is_nan() {
+                0
+            } else if x <= 19 {
+                1
+            } else {
+                2
+            };
+            assert_eq!(l, want, "pixel ({x}, {y})");
+        }
+        assert_eq!(regions[0].label, 1);
+        assert_eq!(regions[0].size_px, 20 * 30 - 12);
+        assert_eq!(regions[1].size_px, 20 * 30);
+        for r in &regions {
+            let n = r.normal;
+            assert_relative_eq!((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt(), 1.0, epsilon = 1e-5);
+            // Camera::Grid looks along −z: normals point toward the sensor.
+            assert!(n[2] < 0.0, "{r:?}");
+            assert!(r.rms_residual < 1e-3, "{r:?}");
+            assert!(r.mean_k.is_nan());
+        }
+        // Left plane: v − 0.5x − 100 = 0 → normal ∝ (−0.5, 0, 1), flipped toward −z.
+        let n = regions[0].normal;
+        assert_relative_eq!(n[0] / n[2], -0.5, epsilon = 1e-4);
+    }
+
+    #[test]
+    fn thick_edges_fill_by_best_plane_and_small_components_are_dropped() {
+        // Edge band x = 16..=23 (8 px), an isolated 2×2 non-edge hole in it at (18..20, 10..12).
+        let range =
+            Grid::from_fn(
+                40,
+                30,
+                |x, _| if x <= 19 { 100.0 + 0.5 * x as f32 } else { 200.0 - 2.0 * x as f32 },
+            );
+        let edges = Grid::from_fn(40, 30, |x, y| {
+            (16..=23).contains(&x) && !((18..20).contains(&x) && (10..12).contains(&y))
+        });
+        let (labels, regions) = segment(
+            &range,
+            &Camera::Grid,
+            &edges,
+            None,
+            &Params { min_region_px: 10, gap_close_px: 0.0, ..Params::default() },
+        );
+        assert_eq!(regions.len(), 2);
+        for (x, y, &l) in labels.enumerate() {
+            assert_eq!(l, if x <= 19 { 1 } else { 2 }, "pixel ({x}, {y})");
+        }
+        assert_eq!(regions.iter().map(|r| r.size_px).sum::<u32>(), 40 * 30);
+    }
+
+    #[test]
+    fn isolated_and_invalid_pixels_stay_unlabelled() {
+        // Everything is edge: no region at all.
+        let range = Grid::new(10, 10, 50.0f32);
+        let (labels, regions) =
+            segment(&range, &Camera::ABW0, &Grid::new(10, 10, true), None, &Params::default());
+        assert!(regions.is_empty());
+        assert!(labels.as_slice().iter().all(|&l| l == 0));
+        // An all-NaN image.
+        let nan = Grid::new(6, 5, f32::NAN);
+        let (labels, regions) =
+            segment(&nan, &Camera::ABW0, &Grid::new(6, 5, false), None, &Params::default());
+        assert!(regions.is_empty() && labels.as_slice().iter().all(|&l| l == 0));
+    }
+
+    #[test]
+    fn labels_are_consecutive_in_raster_order() {
+        // Three vertical stripes separated by edge columns; the middle one starts lower.
+        let range = Grid::from_fn(30, 20, |x, _| 80.0 + x as f32);
+        let edges = Grid::from_fn(30, 20, |x, y| x == 9 || x == 19 || ((10..19).contains(&x) && y < 5));
+        let (labels, regions) = segment(
+            &range,
+            &Camera::ABW0,
+            &edges,
+            None,
+            &Params { min_region_px: 5, gap_close_px: 0.0, ..Params::default() },
+        );
+        assert_eq!(regions.iter().map(|r| r.label).collect::<Vec<_>>(), vec![1, 2, 3]);
+        let mut first = Vec::new();
+        for &l in labels.as_slice() {
+            if l != 0 && !first.contains(&l) {
+                first.push(l);
+            }
+        }
+        assert_eq!(first, vec![1, 2, 3]);
+        assert_eq!(regions.iter().map(|r| r.size_px).sum::<u32>(), 30 * 20);
+        assert_ne!(labels[(0, 0)], labels[(25, 10)]);
+        assert_ne!(labels[(12, 10)], labels[(25, 10)]);
+        // ABW normals point toward the scanner (+z).
+        assert!(regions.iter().all(|r| r.normal[2] > 0.0));
+    }
+
+    /// Region-growing labels: 1 for x < 20, 2 for x ≥ 20 (0 on NaN pixels).
+    fn rg_split(range: &RangeImage) -> LabelImage {
+        Grid::from_fn(range.width(), range.height(), |x, y| {
+            if range[(x, y)].is_nan() {
+                0
+            } else if x < 20 {
+                1
+            } else {
+                2
+            }
+        })
+    }
+
+    fn regions_mode() -> Params {
+        Params { mode: Mode::Regions, ..Params::default() }
+    }
+
+    #[test]
+    fn regions_mode_splits_a_region_along_an_edge_line_inside_it() {
+        // Region growing merged both planes into one region; C separates them.
+        let (range, edges) = two_planes();
+        let rg = range.map(|v| u32::from(v.is_finite()));
+        let (labels, regions) = segment(&range, &Camera::Grid, &edges, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+        assert_eq!(labels[(5, 20)], 1);
+        assert_eq!(labels[(35, 20)], 2);
+        assert_eq!(labels[(0, 0)], 0, "NaN stays unlabelled");
+    }
+
+    #[test]
+    fn regions_mode_never_leaks_across_a_region_growing_border_of_different_planes() {
+        // No edges at all: Components mode gives one region, Regions mode keeps the two
+        // region-growing regions (the border is unsupported, but the planes differ).
+        let (range, _) = two_planes();
+        let none = Grid::new(40, 30, false);
+        let rg = rg_split(&range);
+        let comps = Params { mode: Mode::Components, ..Params::default() };
+        assert_eq!(segment(&range, &Camera::Grid, &none, Some(&rg), &comps).1.len(), 1);
+        // Without region-growing labels, Regions mode falls back to Components.
+        assert_eq!(segment(&range, &Camera::Grid, &none, None, &regions_mode()).1.len(), 1);
+        let (labels, regions) = segment(&range, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+        for (x, y, &l) in labels.enumerate() {
+            let want = if range[(x, y)].is_nan() { 0 } else { rg[(x, y)] };
+            assert_eq!(l, want, "pixel ({x}, {y})");
+        }
+    }
+
+    #[test]
+    fn regions_mode_merges_coplanar_regions_over_an_unsupported_border_only() {
+        // One plane, split in two by region growing.
+        let range = Grid::from_fn(40, 30, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32);
+        let rg = rg_split(&range);
+        let none = Grid::new(40, 30, false);
+        let (labels, regions) = segment(&range, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 1, "unsupported border, same plane: merged");
+        assert_eq!(regions[0].size_px, 40 * 30);
+        assert!(labels.as_slice().iter().all(|&l| l == 1));
+        assert!(regions[0].rms_residual < 1e-3);
+        // The same border with edge support stays.
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let (labels, regions) = segment(&range, &Camera::Grid, &edges, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2, "supported border: kept");
+        assert_ne!(labels[(5, 5)], labels[(35, 5)]);
+        // An edge along a tenth of the border (support ≈ 0.15 < min_border_support = 0.3): merged.
+        let partial = Grid::from_fn(40, 30, |x, y| (x == 19 || x == 20) && y < 3);
+        let (_, regions) = segment(&range, &Camera::Grid, &partial, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 1);
+        // A tilt of 1.0 vs 0.5 per pixel (about 18° apart in Grid units) is not merged.
+        let tilted =
+            Grid::from_fn(
+                40,
+                30,
+                |x, _| if x < 20 { 100.0 + 0.5 * x as f32 } else { 110.0 + (x as f32 - 20.0) },
+            );
+        let (_, regions) = segment(&tilted, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        assert_eq!(regions.len(), 2);
+    }
+
+    #[test]
+    fn regions_mode_rejoins_pieces_of_one_region_split_by_interior_edges_on_one_plane_only() {
+        // Region growing found one region; an edge line inside it splits it in two.
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let one = |range: &RangeImage| range.map(|v| u32::from(v.is_finite()));
+        let count = |range: &RangeImage, sp: &Params| {
+            segment(range, &Camera::Grid, &edges, Some(&one(range)), sp).1.len()
+        };
+        let plane = |x: u32, y: u32| 100.0 + 0.5 * x as f32 + 0.25 * y as f32;
+        let image = |f: &dyn Fn(u32, u32) -> f32| Grid::from_fn(40, 30, f);
+        let plane_img = image(&plane);
+        assert_eq!(count(&plane_img, &regions_mode()), 1, "one plane: the pieces rejoin");
+        let split = Params { merge_within_region: false, ..regions_mode() };
+        assert_eq!(count(&plane_img, &split), 2, "without merge_within_region the edges split it");
+        // Parallel planes one unit apart (within merge_max_residual = 2, far above their RMS of
+        // 0): a real step, kept.
+        let step = image(&|x, y| plane(x, y) + if x < 20 { 0.0 } else { 1.0 });
+        assert_eq!(count(&step, &regions_mode()), 2, "a step between parallel pieces stays");
+        // Two pieces of one noisy plane rejoin, a step of twice the noise does not.
+        let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.25 - 0.5;
+        let noisy = image(&|x, y| plane(x, y) + noise(x, y));
+        assert_eq!(count(&noisy, &regions_mode()), 1);
+        let noisy_step = image(&|x, y| plane(x, y) + noise(x, y) + if x < 20 { 0.0 } else { 0.7 });
+        assert_eq!(count(&noisy_step, &regions_mode()), 2);
+    }
+
+    #[test]
+    fn segment_params_default_validates_and_round_trips() {
+        let p = Params::default();
+        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.mode, Mode::Regions);
+        let json = serde_json::to_string(&p).unwrap();
+        assert!(json.contains(r#""mode":"regions""#), "{json}");
+        let back: Params = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, p);
+        let c: Params = serde_json::from_str(r#"{"mode": "components"}"#).unwrap();
+        assert_eq!(c.mode, Mode::Components);
+        assert!(Params { min_border_support: 1.5, ..p.clone() }.validate().is_err());
+        assert!(Params { within_max_rms_ratio: 0.5, ..p.clone() }.validate().is_err());
+        assert!(Params { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
+        assert!(Params { merge_max_residual: f64::NAN, ..p }.validate().is_err());
+    }
+}

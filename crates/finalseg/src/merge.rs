@@ -1,0 +1,174 @@
+//! Step 4 of the final segmentation (`regions` mode): adjacent regions merged over borders the
+//! edges do not support, or inside one region-growing region, where their planes agree.
+
+use crate::plane::{Plane, fit_plane, mean_sq_residual};
+use crate::{Params, Pieces, Scene};
+use planefit::Moments;
+use rangeimage::EdgeMap;
+use rangeimage::union_find::find;
+use std::collections::BTreeMap;
+
+/// Per adjacent pair of components (smaller label, larger label): (border pixel count, count of
+/// those within 1 px of an edge pixel), over 4-adjacencies.
+type Borders = BTreeMap<(u32, u32), (u32, u32)>;
+
+/// The merge candidates: adjacent pairs in sorted order, and whether each one's border is weakly
+/// supported (else it is a supported border inside one region-growing region).
+struct Candidates {
+    pairs: Vec<(u32, u32)>,
+    weak: Vec<bool>,
+}
+
+/// The plane agreement a merge needs, from [`Params`].
+struct PlaneTest {
+    /// cos of `merge_max_angle_deg`.
+    cos_max: f64,
+    /// `merge_max_residual²`.
+    r2: f64,
+    /// `within_max_rms_ratio²`.
+    k2: f64,
+}
+
+/// Union-find merging of adjacent components of `pieces` over borders weakly supported by
+/// `edges` or, with `merge_within_region`, inside one region-growing region. `parent` is the
+/// union-find forest over labels `0..=n`; roots are the smaller label, and the root's moments and
+/// plane become the merged group's.
+pub(crate) fn merge_unsupported(
+    scene: &Scene<'_>,
+    edges: &EdgeMap,
+    pieces: &mut Pieces,
+    parent: &mut [u32],
+    params: &Params,
+) {
+    let near = near_edges(edges, scene.w, scene.h);
+    let borders = borders(&pieces.comp, &near, scene.w, scene.h);
+    let candidates = candidates(&borders, &pieces.guide, params);
+    let test = PlaneTest {
+        cos_max: params.merge_max_angle_deg.to_radians().cos(),
+        r2: params.merge_max_residual * params.merge_max_residual,
+        k2: params.within_max_rms_ratio * params.within_max_rms_ratio,
+    };
+    let merges = merge_fixpoint(&candidates, &test, parent, &mut pieces.moments, &mut pieces.planes, scene);
+    tracing::debug!(pairs = borders.len(), candidates = candidates.pairs.len(), merges, "merged");
+}
+
+/// The pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR per row,
+/// then a vertical 3-high OR of those rows.
+fn near_edges(edges: &EdgeMap, w: usize, h: usize) -> Vec<bool> {
+    let ed = edges.as_slice();
+    let mut hor = ed.to_vec();
+    for (hrow, erow) in hor.chunks_exact_mut(w.max(1)).zip(ed.chunks_exact(w.max(1))) {
+        for x in 1..w {
+            hrow[x] |= erow[x - 1];
+            hrow[x - 1] |= erow[x];
+        }
+    }
+    let mut near = vec![false; w * h];
+    for (y, nrow) in near.chunks_exact_mut(w.max(1)).enumerate() {
+        for yy in y.saturating_sub(1)..(y + 2).min(h) {
+            for (n, &v) in nrow.iter_mut().zip(&hor[yy * w..(yy + 1) * w]) {
+                *n |= v;
+            }
+        }
+    }
+    near
+}
+
+/// The borders between adjacent components of `comp`, with their support by `near`.
+fn borders(comp: &[u32], near: &[bool], w: usize, h: usize) -> Borders {
+    let mut pairs = Borders::new();
+    let mut add = |i: usize, j: usize| {
+        let (a, b) = (comp[i], comp[j]);
+        if a != 0 && b != 0 && a != b {
+            let entry = pairs.entry((a.min(b), a.max(b))).or_insert((0, 0));
+            entry.0 += 2;
+            entry.1 += u32::from(near[i]) + u32::from(near[j]);
+        }
+    };
+    for y in 0..h {
+        let row = y * w;
+        for x in 1..w {
+            if comp[row + x - 1] != comp[row + x] {
+                add(row + x - 1, row + x);
+            }
+        }
+        if y + 1 < h {
+            for x in 0..w {
+                if comp[row + x] != comp[row + w + x] {
+                    add(row + x, row + w + x);
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
+/// pieces of one region-growing region (`comp_guide[l − 1]` is the region-growing label of `l`).
+fn candidates(borders: &Borders, comp_guide: &[u32], params: &Params) -> Candidates {
+    let (pairs, weak) = borders
+        .iter()
+        .filter_map(|(&(a, b), &(n, s))| {
+            let weak = f64::from(s) < params.min_border_support * f64::from(n);
+            let same_region = params.merge_within_region && {
+                let g = comp_guide[a as usize - 1];
+                g != 0 && g == comp_guide[b as usize - 1]
+            };
+            (weak || same_region).then_some(((a, b), weak))
+        })
+        .unzip();
+    Candidates { pairs, weak }
+}
+
+/// Passes over the candidates in order, merging every pair whose current groups pass `test`
+/// (planes refitted on merge), until a pass merges nothing. Returns the number of merges.
+fn merge_fixpoint(
+    candidates: &Candidates,
+    test: &PlaneTest,
+    parent: &mut [u32],
+    moments: &mut [Moments],
+    planes: &mut [Option<Plane>],
+    scene: &Scene<'_>,
+) -> u32 {
+    let mut merges = 0u32;
+    loop {
+        let mut changed = false;
+        for (k, &(a, b)) in candidates.pairs.iter().enumerate() {
+            let (ra, rb) = (find(parent, a), find(parent, b));
+            if ra == rb {
+                continue;
+            }
+            let (ia, ib) = (ra as usize - 1, rb as usize - 1);
+            let (pa, pb) = (planes[ia].expect("kept region"), planes[ib].expect("kept region"));
+            if !test.agree(&pa, &pb, &moments[ia], &moments[ib], candidates.weak[k]) {
+                continue;
+            }
+            let (root, other) = (ra.min(rb), ra.max(rb));
+            parent[other as usize] = root;
+            let m = moments[other as usize - 1];
+            moments[root as usize - 1].merge(&m);
+            planes[root as usize - 1] = Some(fit_plane(&moments[root as usize - 1], scene.camera));
+            changed = true;
+            merges += 1;
+        }
+        if !changed {
+            return merges;
+        }
+    }
+}
+
+impl PlaneTest {
+    /// Whether groups a and b (planes `pa`, `pb`, moments `ma`, `mb`) may merge over a border that
+    /// is `weak`ly supported or not.
+    fn agree(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, weak: bool) -> bool {
+        let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
+        let (ea, eb) = (mean_sq_residual(ma, pb), mean_sq_residual(mb, pa));
+        if dot.abs() < self.cos_max || ea > self.r2 || eb > self.r2 {
+            return false;
+        }
+        // Within one region-growing region over a supported border: merge only pieces that lie on
+        // one plane within their own noise. (+1e-12: noise-free pieces of one plane have RMS 0 and
+        // rounding-level residuals.)
+        weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12)
+    }
+}

@@ -1,0 +1,58 @@
+//! Region planes: the least-squares plane through the moments of a region's 3D points.
+
+use nalgebra::Vector3;
+use planefit::{Moments, dot};
+use rangeimage::Camera;
+
+/// A fitted 3D plane `normal · p + offset = 0` with the statistics of its support.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Plane {
+    /// Unit normal, oriented toward the sensor.
+    pub(crate) normal: [f64; 3],
+    /// Offset.
+    pub(crate) offset: f64,
+    /// RMS distance of the support's points to the plane.
+    pub(crate) rms: f64,
+}
+
+impl Plane {
+    /// Distance of `p` to the plane.
+    pub(crate) fn residual(&self, p: [f64; 3]) -> f64 {
+        (self.normal[0] * p[0] + self.normal[1] * p[1] + self.normal[2] * p[2] + self.offset).abs()
+    }
+}
+
+/// Mean squared distance of the points summarised by `m` to `plane` (`nᵀ·Σ·n` plus the centroid's
+/// squared distance).
+pub(crate) fn mean_sq_residual(m: &Moments, plane: &Plane) -> f64 {
+    let nv = Vector3::from(plane.normal);
+    let c = m.centroid();
+    let along = plane.normal[0] * c[0] + plane.normal[1] * c[1] + plane.normal[2] * c[2] + plane.offset;
+    ((nv.transpose() * m.covariance() * nv)[0]).max(0.0) + along * along
+}
+
+/// Least-squares plane of the points summarised by `m`: the eigenvector of the first smallest
+/// eigenvalue of the covariance (`[0, 0, 1]` if it has no length), with the normal oriented toward
+/// the sensor. Always a plane, even for degenerate point sets.
+pub(crate) fn fit_plane(m: &Moments, camera: &Camera) -> Plane {
+    let c = m.centroid();
+    let axes = m.axes();
+    let mut k = 0;
+    for i in 1..3 {
+        if axes.values[i] < axes.values[k] {
+            k = i;
+        }
+    }
+    let v = axes.vectors[k];
+    // The same sum of squares, in the same order, as nalgebra's `norm`.
+    let len = dot(v, v).sqrt();
+    let mut normal = if len > 0.0 { [v[0] / len, v[1] / len, v[2] / len] } else { [0.0, 0.0, 1.0] };
+    let toward = camera.toward_sensor(c);
+    if normal[0] * toward[0] + normal[1] * toward[1] + normal[2] * toward[2] < 0.0 {
+        normal = normal.map(|x| -x);
+    }
+    let offset = -(normal[0] * c[0] + normal[1] * c[1] + normal[2] * c[2]);
+    let mut plane = Plane { normal, offset, rms: 0.0 };
+    plane.rms = mean_sq_residual(m, &plane).sqrt();
+    plane
+}
