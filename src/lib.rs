@@ -12,4 +12,4 @@ pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams, Ra
 pub use output::{OutputSet, write_outputs, write_selected_outputs};
 pub use pipeline::{Output, segment};
 pub use planes::{Plane, planes};
-pub use {eval, features, finalseg, rangeimage, rangeio, regiongrow, relax, vcanny};
+pub use {eval, features, finalseg, isa, rangeimage, rangeio, regiongrow, relax, vcanny};

@@ -7,6 +7,10 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     init_tracing();
+    if let Err(e) = rangeseg::isa::limit_from_env() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let args = cli::Cli::parse();
     exit_cleanly_on_signals();
     match cli::run(args) {

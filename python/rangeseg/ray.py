@@ -168,7 +168,13 @@ def run(
         ctx.execution_options.preserve_order = True  # rows in input order: the same table on any cluster
         ctx.enable_progress_bars = False
         t0 = time.perf_counter()
-        ds = ray.data.read_binary_files(files, include_paths=True)
+        # A few blocks per CPU (each block one task that reads and segments its files): per-task overhead stays
+        # small next to the segmentation, and every CPU still gets work until the end.
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        if address is not None and workers:
+            cpus = min(cpus, workers)
+        blocks = max(1, min(len(files), 4 * cpus))
+        ds = ray.data.read_binary_files(files, include_paths=True, override_num_blocks=blocks)
         ds = ds.map_batches(
             _segment_batch,
             batch_size=1,

@@ -27,6 +27,15 @@ pub(crate) fn curvature_row(
     h_out: &mut [f32],
     curvedness: &mut [f32],
 ) {
+    isa::dispatch(
+        #[inline(always)]
+        || curvature_row_kernel(deriv, k_out, h_out, curvedness),
+    );
+}
+
+/// [`curvature_row`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+#[inline(always)]
+fn curvature_row_kernel(deriv: &[Vec<f32>; 5], k_out: &mut [f32], h_out: &mut [f32], curvedness: &mut [f32]) {
     let n = k_out.len();
     let [ix, iy, l, m, nn] = deriv.each_ref().map(|d| &d[..n]);
     let (h_out, curvedness) = (&mut h_out[..n], &mut curvedness[..n]);
@@ -95,6 +104,15 @@ impl WindowStd {
 
     /// Adds row `y` of K (rows in order).
     pub(crate) fn push_row(&mut self, y: usize, k: &[f32]) {
+        isa::dispatch(
+            #[inline(always)]
+            || self.push_row_kernel(y, k),
+        );
+    }
+
+    /// [`Self::push_row`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+    #[inline(always)]
+    fn push_row_kernel(&mut self, y: usize, k: &[f32]) {
         let (wu, r) = (self.wu, self.r);
         let slot = (y % (2 * r + 2)) * wu;
         if r <= 3 {
@@ -132,6 +150,7 @@ impl WindowStd {
     }
 
     /// Adds ring row `add` to the running sums and removes ring row `sub` (either may be absent).
+    #[inline(always)] // inlined into the dispatched kernels (isa::dispatch)
     fn update(&mut self, add: Option<usize>, sub: Option<usize>) {
         let (wu, slots) = (self.wu, 2 * self.r + 2);
         running_update(&mut self.acc_n, &self.ring_n, wu, slots, add, sub);
@@ -143,6 +162,15 @@ impl WindowStd {
     /// Writes row `y` of the standard deviation (NaN where `k_row`, row `y` of K, is not finite); rows
     /// `y − r ..= min(y + r, hu − 1)` must have been pushed, and rows `0..y` written before.
     pub(crate) fn out_row(&mut self, y: usize, k_row: &[f32], out: &mut [f32]) {
+        isa::dispatch(
+            #[inline(always)]
+            || self.out_row_kernel(y, k_row, out),
+        );
+    }
+
+    /// [`Self::out_row`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+    #[inline(always)]
+    fn out_row_kernel(&mut self, y: usize, k_row: &[f32], out: &mut [f32]) {
         let (wu, r) = (self.wu, self.r);
         while self.next_add < (y + r).min(self.hu - 1) {
             self.update(Some(self.next_add), None);
@@ -193,6 +221,7 @@ fn ring_row<T>(ring: &[T], yy: usize, slots: usize, wu: usize) -> &[T] {
 }
 
 /// Adds ring row `add` to the running sums `acc` and removes ring row `sub` (either may be absent).
+#[inline(always)] // inlined into the dispatched kernels (isa::dispatch)
 fn running_update<T>(
     acc: &mut [T],
     ring: &[T],
@@ -228,6 +257,7 @@ fn terms(v: f32) -> (f32, f64, f64) {
 /// Horizontal box sums over `W = 2R + 1` pixels (count, Σk, Σk²) of the row `k` into `c`, `s1`, `s2`, straight from
 /// K: the sum of each pixel runs over its window left to right, the padding beyond the row ends adding zeros (the
 /// window loop unrolled; the interior vectorises across pixels).
+#[inline(always)] // inlined into the dispatched kernels (isa::dispatch)
 fn box_k<const R: usize, const W: usize>(k: &[f32], c: &mut [f32], s1: &mut [f64], s2: &mut [f64]) {
     let wu = k.len();
     let (c, s1, s2) = (&mut c[..wu], &mut s1[..wu], &mut s2[..wu]);

@@ -440,6 +440,25 @@ impl<'a> RowFitter<'a> {
         ixy: &mut [f32],
         iyy: &mut [f32],
     ) {
+        isa::dispatch(
+            #[inline(always)]
+            || self.fused_kernel::<R, W, Q>(y, plane, ix, iy, ixx, ixy, iyy),
+        );
+    }
+
+    /// [`Self::fused`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn fused_kernel<const R: usize, const W: usize, const Q: bool>(
+        &mut self,
+        y: usize,
+        plane: &mut [[f32; 3]],
+        ix: &mut [f32],
+        iy: &mut [f32],
+        ixx: &mut [f32],
+        ixy: &mut [f32],
+        iyy: &mut [f32],
+    ) {
         let wu = self.wu;
         let m = wu - 2 * R;
         let src = self.src;
@@ -744,6 +763,15 @@ impl<'a> RowFitter<'a> {
     /// [`Self::general_fit`].
     #[inline(never)]
     fn shape_row(&mut self, y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
+        isa::dispatch(
+            #[inline(always)]
+            || self.shape_row_kernel(y, plane, deriv),
+        );
+    }
+
+    /// [`Self::shape_row`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+    #[inline(always)]
+    fn shape_row_kernel(&mut self, y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
         let (wu, hu, r) = (self.wu, self.hu, self.r);
         let (ri, yi) = (r as i64, y as i64);
         let (vlo, vhi) = ((-yi).max(-ri), (hu as i64 - 1 - yi).min(ri));

@@ -652,6 +652,32 @@ mod tests {
     }
 
     #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        // The row loops run compiled for each instruction set of this CPU (isa::dispatch): the same bits on each.
+        let windows = [(5, 5, 5), (3, 3, 3), (7, 7, 5), (5, 3, 9)];
+        for seed in 0..8u64 {
+            let (w, h) = (40 + (seed as u32 * 13) % 50, 30 + (seed as u32 * 7) % 40);
+            let (scale, quantise) = if seed % 3 == 2 { (0.013, false) } else { (1.0, seed % 3 == 0) };
+            let img = random_image(100 + seed, w, h, scale, quantise);
+            let (window_px, deriv_window_px, k_std_window_px) = windows[seed as usize % windows.len()];
+            let p = Params { window_px, deriv_window_px, k_std_window_px };
+            let run =
+                || (bits(&compute(&img, &p)), dbits(&derivatives(&img, &p)), fit_planes(&img, window_px));
+            let paths: Vec<_> = isa::Isa::available()
+                .into_iter()
+                .map(|i| (i, isa::with_isa(i, run).expect("available")))
+                .collect();
+            for (i, out) in &paths[1..] {
+                let (base, b) = &paths[0];
+                assert!(out.0 == b.0 && out.1 == b.1, "seed {seed}: {i:?} differs from {base:?}");
+                let pb =
+                    |m: &PlaneMap| m.as_slice().iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(pb(&out.2), pb(&b.2), "seed {seed}: fit_planes, {i:?} vs {base:?}");
+            }
+        }
+    }
+
+    #[test]
     fn exact_fits_equal_the_general_path_bit_for_bit() {
         // The fast path fits the top and bottom border rows a whole row at a time (and the side columns pixel by
         // pixel), and the full windows holding no-data four at a time (their solves side by side): the same

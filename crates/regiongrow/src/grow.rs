@@ -181,6 +181,7 @@ impl Proj for GridProj {
 
 /// Padded geometry records, initial labels (0 = growable, [`BLOCKED`] otherwise) and the number
 /// of growable pixels.
+#[inline(always)] // into `run`, compiled for each instruction set
 fn geometry<P: Proj>(
     proj: &P,
     range: &[f32],
@@ -285,6 +286,7 @@ fn abw_normal(k: &AbwNormal, a: f64, b: f64, v: f64, u: f64, t: f64) -> ([f64; 3
 /// `z ≥ 0`: one square root and one division per pixel instead of the general path's eleven
 /// divisions. Points use [`Camera::point`]'s formula with the divisions by `|f|` and `scal`
 /// replaced by products with reciprocals (within an `f64` ulp, far below the `f32` storage).
+#[inline(always)] // into `run`, compiled for each instruction set
 fn geometry_abw(
     cal: AbwCalibration,
     range: &[f32],
@@ -364,6 +366,7 @@ fn geometry_abw(
 }
 
 /// The stage on the buffers of `scratch`, writing `out` (whose grids are reused when of the right size).
+#[inline(always)] // into `isa::dispatch` in `grow`: compiled for each instruction set
 pub(crate) fn run(
     range: &RangeImage,
     features: &SurfaceFeatures,
@@ -598,6 +601,7 @@ fn refit_due(last: usize, refit_min: usize) -> usize {
 
 /// Default mode: grows region `id` from `seed` with the curvedness, normal-angle and plane
 /// residual tests, refitting the region plane on an amortised schedule. `N` = connectivity.
+#[inline(always)] // into `run`, compiled for each instruction set
 fn grow_default<const N: usize>(
     ctx: &Ctx<'_>,
     params: &Params,
@@ -706,6 +710,7 @@ fn grow_paper<const N: usize>(
 /// image, is unlabelled and growable, and passes the growth test of the mode against the seed's
 /// own local plane (default mode) or K (paper mode). Rejects seeds on noise, near depth jumps and
 /// on creases.
+#[inline(always)] // into `run`, compiled for each instruction set
 fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u32]) -> bool {
     if radius == 0 {
         return true;
@@ -750,6 +755,7 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
 /// Gives unlabelled valid pixels to the 4-adjacent region whose plane is nearest (if within
 /// `fill_max_residual`), flooding breadth-first from the region borders. `used[l]`: label `l`
 /// occurs in `labels`. Returns the pixel count.
+#[inline(always)] // into `run`, compiled for each instruction set
 fn fill(
     ctx: &Ctx<'_>,
     params: &Params,

@@ -339,7 +339,11 @@ pub fn grow_into(
     for (name, ok) in need_sizes {
         assert!(ok, "regiongrow::grow: features.{name} differs in size from the range image");
     }
-    grow::run(range, features, camera, params, seed, scratch, out)
+    // Compiled for the best instruction set of this CPU (bit-identical on every one).
+    isa::dispatch(
+        #[inline(always)]
+        || grow::run(range, features, camera, params, seed, scratch, out),
+    )
 }
 
 /// Region border pixels C1 of a label image.

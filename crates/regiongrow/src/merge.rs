@@ -55,6 +55,7 @@ pub(crate) fn region_stats<const N: usize>(
 }
 
 /// [`region_stats`] into `st`, whose memory is reused.
+#[inline(always)] // into `grow::run`, compiled for each instruction set
 pub(crate) fn region_stats_into<const N: usize>(
     labels: &[u32],
     max_label: u32,

@@ -500,3 +500,39 @@ fn outputs_are_pinned_on_six_setups() {
     ];
     assert_eq!(got, want, "outputs changed:\n{got:#x?}");
 }
+
+#[test]
+fn every_instruction_set_gives_the_same_bits() {
+    // `grow` runs compiled for each instruction set of this CPU (isa::dispatch): the same output on each.
+    let pinhole = Camera::Pinhole { fx: 80.0, fy: 80.0, cx: 47.5, cy: 47.5, depth_scale: 0.01 };
+    let abw = abw_like_scene(96);
+    let boxes = box_scene();
+    let cases = [
+        (&abw, Camera::ABW0, Params { min_region_px: 30, ..Params::default() }),
+        (&abw, pinhole, Params { min_region_px: 30, ..Params::default() }),
+        (&boxes, Camera::Grid, small_params()),
+        (&abw, Camera::ABW0, Params { min_region_px: 30, ..Params::paper() }),
+    ];
+    let bits = |seg: &Segmentation| -> Vec<u32> {
+        seg.regions
+            .iter()
+            .flat_map(|r| {
+                [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
+                    .into_iter()
+                    .chain(r.normal.map(f32::to_bits))
+            })
+            .collect()
+    };
+    for (case, (s, camera, params)) in cases.iter().enumerate() {
+        let run = || grow(&s.range, &s.features, camera, params, 7);
+        let (a, ia) = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+        assert!(!a.regions.is_empty(), "case {case}: {ia:?}");
+        for other in isa::Isa::available() {
+            let (b, ib) = isa::with_isa(other, run).expect("available");
+            assert_eq!(a.labels, b.labels, "case {case}: {other:?}");
+            assert_eq!(a.c1, b.c1, "case {case}: {other:?}");
+            assert_eq!(bits(&a), bits(&b), "case {case}: {other:?}");
+            assert_eq!(ia, ib, "case {case}: {other:?}");
+        }
+    }
+}

@@ -36,6 +36,7 @@ impl Input<'_> {
 
     /// Loads row `y`: `ok[x]` = `valid` (true if `None`) and every channel finite; `pads` holds one row of
     /// `w + 2r` per channel, whose middle `r..r + w` gets the channel's values, 0 where not ok.
+    #[inline(always)] // into `gradient`, compiled for each instruction set
     fn load_row(&self, y: usize, valid: Option<&[bool]>, ok: &mut [bool], pads: &mut [f32], r: usize) {
         let w = ok.len();
         let pw = w + 2 * r;
@@ -96,6 +97,16 @@ pub(crate) struct Gradient {
 
 /// `out[x] = Σ_k g[k] · rows[k][x]`, accumulated from 0 in tap order (one pass for the common 3 and 5 taps).
 fn weighted_sum(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
+    // Called from a closure of `gradient` that is not inlined: dispatched on its own.
+    isa::dispatch(
+        #[inline(always)]
+        || weighted_sum_kernel(rows, g, out),
+    );
+}
+
+/// [`weighted_sum`]'s body, compiled for each instruction set ([`isa::dispatch`]).
+#[inline(always)]
+fn weighted_sum_kernel(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
     let w = out.len();
     match (rows, g) {
         ([r0, r1, r2, r3, r4], &[g0, g1, g2, g3, g4]) => {
@@ -123,6 +134,7 @@ fn weighted_sum(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
 
 /// Horizontal correlation of `pad[r..r + w]` (zeros on both sides) with `g` into `dst`, accumulating from 0 in
 /// tap order.
+#[inline(always)] // into `gradient`, compiled for each instruction set
 fn horizontal(pad: &[f32], g: &[f32], dst: &mut [f32]) {
     let w = dst.len();
     let mut rows = [&pad[..0]; crate::MAX_KERNEL_PX];
@@ -137,6 +149,7 @@ fn horizontal(pad: &[f32], g: &[f32], dst: &mut [f32]) {
 /// non-maxima. Channels of weight 0 are skipped. The magnitudes of the ok pixels are counted into `hist`.
 /// The result reuses the memory of `bufs`.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)] // into `isa::dispatch` in `run`: compiled for each instruction set
 pub(crate) fn gradient(
     input: &Input<'_>,
     weights: &[f32],
@@ -330,6 +343,7 @@ fn sobel(a: f32, b: f32, c: f32, d: f32, f: f32, g: f32, h: f32, i: f32) -> (f32
 /// Adds `wt · [gx², gx·gy, gy²]` of the Sobel derivatives of one row to the tensor row. A neighbour that is not
 /// `ok` (or outside the image) takes the centre pixel's value, so missing data adds no gradient and real steps
 /// between valid pixels are kept. Values at centres that are not `ok` are meaningless (masked later).
+#[inline(always)] // into `gradient`, compiled for each instruction set
 fn sobel_row(
     s: &SobelRows<'_>,
     runs: &[(usize, usize, bool)],
@@ -416,6 +430,7 @@ fn sobel_row(
 
 /// Splits the interior columns `1..w − 1` of a row into runs `(x0, x1, full)`: `full` if every pixel of the 3×3
 /// neighbourhood of every column in the run is ok. `col` and `full` are scratch.
+#[inline(always)] // into `gradient`, compiled for each instruction set
 fn interior_runs(
     s: &SobelRows<'_>,
     col: &mut Vec<u8>,
@@ -453,6 +468,7 @@ fn interior_runs(
 /// Magnitude `sqrt(λmax)` (0 where not `ok`) and an eigenvector of `λmax` (not normalised), canonically
 /// oriented (`dx > 0`, or `dx = 0` and `dy ≥ 0`; `(1, 0)` where undefined), of one row of the tensor.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)] // into `gradient`, compiled for each instruction set
 fn eigen_row(
     jxx: &[f32],
     jxy: &[f32],
@@ -494,6 +510,7 @@ fn eigen_row(
 /// direction, so a symmetric two-pixel ridge gives a one-pixel edge. `keep` gets 1 or 0. `m = [up, centre,
 /// down]` are magnitude rows padded with one column on each side (0 outside the image and at no-data pixels);
 /// `dx`, `dy` and `keep` have the row's length.
+#[inline(always)] // into `gradient`, compiled for each instruction set
 pub(crate) fn nms_row(m: [&[f32]; 3], dx: &[f32], dy: &[f32], keep: &mut [u8]) {
     let w = keep.len();
     let (dx, dy) = (&dx[..w], &dy[..w]);

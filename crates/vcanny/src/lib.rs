@@ -245,7 +245,11 @@ fn run(
     bufs.magnitude = std::mem::take(&mut out.magnitude).into_vec();
     let valid = valid.map(|v| v.as_slice());
     let mut hist = hist;
-    let mut grad = gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs);
+    // The per-pixel passes, compiled for the best instruction set of this CPU (bit-identical on every one).
+    let mut grad = isa::dispatch(
+        #[inline(always)]
+        || gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs),
+    );
     let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist);
     let mut edges = std::mem::take(&mut out.edges).into_vec();
     let bufs = (&mut edges, &mut scratch.stack);

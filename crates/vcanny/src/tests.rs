@@ -436,3 +436,36 @@ mod fast_path {
         }
     }
 }
+
+#[test]
+fn every_instruction_set_gives_the_same_bits() {
+    // The gradient pass runs compiled for each instruction set of this CPU (isa::dispatch): the same bits on each.
+    use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(17);
+    let (w, h) = (77, 53);
+    let range = Grid::from_fn(w, h, |x, y| {
+        let z = if x < 40 { 100.0 + 0.5 * x as f32 } else { 140.0 - 0.3 * x as f32 + 0.2 * y as f32 };
+        if (x + 3 * y) % 29 == 0 { NAN } else { z + rng.random_range(-0.5f32..0.5) }
+    });
+    let plane = Grid::from_fn(w, h, |x, y| {
+        let v = range[(x, y)];
+        [0.01 * v, if x < 40 { 0.5 } else { -0.3 }, v]
+    });
+    let valid = rangeimage::valid_mask(&range);
+    let bits =
+        |e: &Edges| (e.edges.clone(), e.magnitude.as_slice().iter().map(|m| m.to_bits()).collect::<Vec<_>>());
+    for params in [
+        Params::default(),
+        Params { sigma_px: 2.0, kernel_px: 9, weights: [1.0, 0.5, 0.25], ..Params::default() },
+    ] {
+        let run = || (bits(&detect_planes(&plane, &valid, &params)), bits(&detect_raw(&range, &params)));
+        let a = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+        assert!(a.0.0.as_slice().iter().any(|&e| e) && a.1.0.as_slice().iter().any(|&e| e));
+        for other in isa::Isa::available() {
+            assert!(
+                isa::with_isa(other, run).expect("available") == a,
+                "{other:?} differs from the baseline"
+            );
+        }
+    }
+}
