@@ -184,17 +184,7 @@ fn same_seed_same_output_in_1_and_2_thread_pools() {
     assert_eq!(a.labels, b.labels);
     assert_eq!(a.c1, b.c1);
     assert_eq!(ia, ib);
-    let bits = |seg: &Segmentation| -> Vec<u32> {
-        seg.regions
-            .iter()
-            .flat_map(|r| {
-                [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
-                    .into_iter()
-                    .chain(r.normal.map(f32::to_bits))
-            })
-            .collect()
-    };
-    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(region_bits(&a), region_bits(&b));
     assert!(a.regions.len() >= 4, "{ia:?}");
 }
 
@@ -513,16 +503,6 @@ fn every_instruction_set_gives_the_same_bits() {
         (&boxes, Camera::Grid, small_params()),
         (&abw, Camera::ABW0, Params { min_region_px: 30, ..Params::paper() }),
     ];
-    let bits = |seg: &Segmentation| -> Vec<u32> {
-        seg.regions
-            .iter()
-            .flat_map(|r| {
-                [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
-                    .into_iter()
-                    .chain(r.normal.map(f32::to_bits))
-            })
-            .collect()
-    };
     for (case, (s, camera, params)) in cases.iter().enumerate() {
         let run = || grow(&s.range, &s.features, camera, params, 7);
         let (a, ia) = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
@@ -531,8 +511,20 @@ fn every_instruction_set_gives_the_same_bits() {
             let (b, ib) = isa::with_isa(other, run).expect("available");
             assert_eq!(a.labels, b.labels, "case {case}: {other:?}");
             assert_eq!(a.c1, b.c1, "case {case}: {other:?}");
-            assert_eq!(bits(&a), bits(&b), "case {case}: {other:?}");
+            assert_eq!(region_bits(&a), region_bits(&b), "case {case}: {other:?}");
             assert_eq!(ia, ib, "case {case}: {other:?}");
         }
     }
+}
+
+/// Every field of every region of `seg`, floats as their bits (for bit-for-bit comparisons).
+fn region_bits(seg: &Segmentation) -> Vec<u32> {
+    seg.regions
+        .iter()
+        .flat_map(|r| {
+            [r.label, r.size_px, r.mean_k.to_bits(), r.offset.to_bits(), r.rms_residual.to_bits()]
+                .into_iter()
+                .chain(r.normal.map(f32::to_bits))
+        })
+        .collect()
 }
