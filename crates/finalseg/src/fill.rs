@@ -17,7 +17,7 @@ pub(crate) struct Limit {
 
 impl Limit {
     /// Whether a pixel at distance `res` from `plane` is too far to join it.
-    fn refuses(&self, res: f64, plane: &Plane) -> bool {
+    pub(crate) fn refuses(&self, res: f64, plane: &Plane) -> bool {
         self.max_residual > 0.0 && res > self.max_residual.max(self.rms_ratio * plane.rms)
     }
 }
@@ -120,7 +120,7 @@ fn next_ring(
 
 /// Calls `f(index, x, y)` for every in-image 8-neighbour of (x, y).
 #[inline(always)]
-fn for_neighbours(x: usize, y: usize, w: usize, h: usize, mut f: impl FnMut(usize, usize, usize)) {
+pub(crate) fn for_neighbours(x: usize, y: usize, w: usize, h: usize, mut f: impl FnMut(usize, usize, usize)) {
     let i = y * w + x;
     if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
         f(i - w - 1, x - 1, y - 1);
