@@ -377,17 +377,68 @@ pub(crate) fn run(
     out_seg: &mut Segmentation,
 ) -> Info {
     let Scratch { geo, labels, k, queue, cand, merge: mbufs, fill_planes } = scratch;
-    let (wu, hu) = range.dimensions();
-    let (w, h) = (wu as usize, hu as usize);
+    let (w, h) = (range.width() as usize, range.height() as usize);
     let n = w * h;
-    let r = range.as_slice();
-    let paper = params.mode == Mode::Paper;
-    let k_std = features.k_std.as_slice();
+    let (origin, growable) = padded_inputs(range, features, camera, params, (geo, labels, k));
+    let labels = &mut labels[..];
+    // The per-label vectors get room for every label a frame of this size can have (memory that is reserved,
+    // and touched only as far as used), so frames with more regions than the first reuse them too.
+    let max_labels = (params.max_seeds as usize).min(n) + 1;
+    mbufs.reserve(max_labels);
+    fill_planes.clear();
+    fill_planes.reserve(max_labels);
     let pw = w + 2;
-    let pn = pw * (h + 2);
+    let p = pw as isize;
+    let offs = [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1];
+    let ctx =
+        Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo: &geo[..], k: &k[..], origin, camera };
 
-    // 3D points relative to the first valid pixel's point (keeps f32 storage and f64 sums exact enough).
-    let origin = (0..n)
+    let mut info = Info::default();
+    queue.clear();
+    queue.reserve(n);
+    let k_std = features.k_std.as_slice();
+    let next = seed_and_grow(&ctx, params, seed, k_std, growable, (labels, queue, cand), &mut info);
+
+    // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
+    let toward = |p: [f64; 3]| ctx.toward(p);
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+    info.n_merged = merged.n_merged;
+    info.n_merge_passes = merged.n_passes;
+    tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
+
+    let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
+    info.n_dropped = n_dropped;
+    if params.fill_unlabelled {
+        info.n_filled_px = fill(&ctx, params, (&mbufs.stats, &used), labels, queue, fill_planes);
+        if params.merge_after_fill && info.n_filled_px > 0 {
+            // Regions that a band of non-growable pixels kept apart touch now: merge again.
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+            info.n_merged += again.n_merged;
+            info.n_merge_passes += again.n_passes;
+        }
+    }
+
+    (info.n_regions, info.n_unlabelled_valid_px) =
+        relabel_into(&ctx, range, labels, next, &mut mbufs.stats, out_seg);
+    borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
+    tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
+    info
+}
+
+/// Fills the padded buffers `(geo, labels, k)` of `run` (see [`geometry`]; K with a NaN frame) and returns the
+/// origin of the 3D points, the point of the first valid pixel (relative points keep f32 storage and f64 sums
+/// exact enough), and the number of growable pixels.
+#[inline(always)] // into `run`, compiled for each instruction set
+fn padded_inputs(
+    range: &RangeImage,
+    features: &SurfaceFeatures,
+    camera: &Camera,
+    params: &Params,
+    (geo, labels, k): (&mut Vec<[f32; 6]>, &mut Vec<u32>, &mut Vec<f32>),
+) -> ([f64; 3], usize) {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let r = range.as_slice();
+    let origin = (0..w * h)
         .find(|&i| r[i].is_finite())
         .and_then(|i| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i])))
         .unwrap_or([0.0; 3]);
@@ -398,34 +449,39 @@ pub(crate) fn run(
         }
         Camera::Grid => geometry(&GridProj, r, features, params, (w, h), origin, (geo, labels)),
     };
-    let labels = &mut labels[..];
-    // The per-label vectors get room for every label a frame of this size can have (memory that is reserved,
-    // and touched only as far as used), so frames with more regions than the first reuse them too.
-    let max_labels = (params.max_seeds as usize).min(n) + 1;
-    mbufs.reserve(max_labels);
-    fill_planes.clear();
-    fill_planes.reserve(max_labels);
-    sized(k, pn);
+    let pw = w + 2;
+    sized(k, pw * (h + 2));
     set_frame(k, pw, f32::NAN);
     for (y, row) in features.k.rows().enumerate() {
         let dst = (y + 1) * pw + 1;
         k[dst..dst + w].copy_from_slice(row);
     }
-    let p = pw as isize;
-    let offs = [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1];
-    let ctx =
-        Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo: &geo[..], k: &k[..], origin, camera };
+    (origin, growable)
+}
 
-    // Seeds: random draws without replacement among the candidates, grown one after the other.
-    let mut info = Info::default();
+/// Seeds and grows the regions: random draws without replacement among the candidates (pixels on the seed
+/// stride whose `k_std` is at most the round's threshold), grown one after the other, with the threshold
+/// doubled for another round while too few seeds were found. `growable` pixels are unlabelled at the start;
+/// seeding stops when fewer than a kept region remain. Leaves the non-growable pixels at 0 (unlabelled) and
+/// returns the next free label.
+#[inline(always)] // into `run`, compiled for each instruction set
+fn seed_and_grow(
+    ctx: &Ctx<'_>,
+    params: &Params,
+    seed: u64,
+    k_std: &[f32],
+    growable: usize,
+    (labels, queue, cand): (&mut [u32], &mut Vec<u32>, &mut Vec<u32>),
+    info: &mut Info,
+) -> u32 {
+    let (w, h) = (ctx.w, ctx.h);
+    let paper = params.mode == Mode::Paper;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    queue.clear();
-    queue.reserve(n);
     let mut t = params.t_sigma;
     let mut next = 1u32;
     let stride = params.seed_stride_px as usize;
     let off = stride / 2;
-    // Unlabelled growable pixels left; seeding stops when fewer than a kept region remain.
+    // Unlabelled growable pixels left.
     let mut left = growable;
     let min_left = (params.min_region_px as usize).max(1);
     for round in 0..=MAX_RELAXATIONS {
@@ -453,14 +509,14 @@ pub(crate) fn run(
             }
             info.n_draws += 1;
             let c = c as usize;
-            if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, labels) {
+            if labels[c] != 0 || !seed_ok(ctx, params, c, radius, labels) {
                 continue;
             }
             let grown = match (paper, ctx.eight) {
-                (true, false) => grow_paper::<4>(&ctx, params, c, next, labels, queue),
-                (true, true) => grow_paper::<8>(&ctx, params, c, next, labels, queue),
-                (false, false) => grow_default::<4>(&ctx, params, c, next, labels, queue),
-                (false, true) => grow_default::<8>(&ctx, params, c, next, labels, queue),
+                (true, false) => grow_paper::<4>(ctx, params, c, next, labels, queue),
+                (true, true) => grow_paper::<8>(ctx, params, c, next, labels, queue),
+                (false, false) => grow_default::<4>(ctx, params, c, next, labels, queue),
+                (false, true) => grow_default::<8>(ctx, params, c, next, labels, queue),
             };
             left -= grown;
             next += 1;
@@ -480,17 +536,12 @@ pub(crate) fn run(
             *l = 0;
         }
     }
+    next
+}
 
-    // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
-    let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
-    info.n_merged = merged.n_merged;
-    info.n_merge_passes = merged.n_passes;
-    let stats = &mbufs.stats;
-    tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
-
-    // Drop small regions.
-    let min = params.min_region_px;
+/// Unlabels the regions of fewer than `min` pixels. Returns which labels are still in the image and how many
+/// were dropped.
+fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
     let mut keep = vec![false; stats.len()];
     for (l, s) in stats.iter().enumerate().skip(1) {
         // Only roots still carry their pixels; merged-away labels no longer occur in `labels`.
@@ -505,49 +556,45 @@ pub(crate) fn run(
             }
         }
     }
-    info.n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
-    // The labels still in the image.
-    let used: Vec<bool> = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
+    let n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
+    let used = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
+    (used, n_dropped)
+}
 
-    if params.fill_unlabelled {
-        info.n_filled_px = fill(&ctx, params, (stats, &used), labels, queue, fill_planes);
-        if params.merge_after_fill && info.n_filled_px > 0 {
-            // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
-            info.n_merged += again.n_merged;
-            info.n_merge_passes += again.n_passes;
-        }
-    }
-
-    // Final statistics under the current labels, then relabel 1..n in raster order of first
-    // pixel while copying out of the padded grid (one pass).
-    region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut mbufs.stats);
-    let stats = &mbufs.stats;
+/// Final statistics under the current labels (labels below `next`), then the labels relabelled 1..n in raster
+/// order of first pixel while copied out of the padded grid into `out_seg.labels` (one pass), and the region
+/// records. Returns the number of regions and of valid pixels left unlabelled.
+fn relabel_into(
+    ctx: &Ctx<'_>,
+    range: &RangeImage,
+    labels: &[u32],
+    next: u32,
+    stats: &mut Vec<Stats>,
+    out_seg: &mut Segmentation,
+) -> (u32, u32) {
+    let (w, h) = (ctx.w, ctx.h);
+    region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats);
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];
     for (new, &old) in order.iter().enumerate() {
         map[old as usize] = new as u32 + 1;
     }
-    let n_regions = order.len() as u32;
-    info.n_regions = n_regions;
     out_seg.regions.clear();
-    out_seg.regions.extend(order.iter().zip(1..).map(|(&old, l)| region_of(&ctx, l, &stats[old as usize])));
+    out_seg.regions.extend(order.iter().zip(1..).map(|(&old, l)| region_of(ctx, l, &stats[old as usize])));
     let mut out = std::mem::take(&mut out_seg.labels).into_vec();
     out.clear();
-    out.reserve(n);
+    out.reserve(w * h);
     let mut unlabelled = 0u32;
-    for (y, rrow) in r.chunks_exact(w.max(1)).take(h).enumerate() {
+    for (y, rrow) in range.as_slice().chunks_exact(w.max(1)).take(h).enumerate() {
         let src = ctx.pad(0, y);
         let lrow = &labels[src..src + w];
         out.extend(lrow.iter().map(|&l| map[l as usize]));
         unlabelled += lrow.iter().zip(rrow).map(|(&l, v)| u32::from(l == 0 && v.is_finite())).sum::<u32>();
     }
-    info.n_unlabelled_valid_px = unlabelled;
+    let (wu, hu) = range.dimensions();
     out_seg.labels = Grid::from_vec(wu, hu, out).expect("same size");
-    borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
-    tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
-    info
+    (order.len() as u32, unlabelled)
 }
 
 /// Unit normal (toward the sensor) of the local plane with slopes `(a, b)` (range units per
