@@ -6,22 +6,38 @@ use crate::fill::{Limit, for_neighbours};
 use crate::plane::{Plane, fit_plane};
 use planefit::Moments;
 
+/// The working memory of [`refine`] and [`refit`], kept from one frame to the next.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// The pixels a pass examines, in raster order.
+    cand: Vec<u32>,
+    /// The moves a pass decided: (pixel, new label).
+    moves: Vec<(u32, u32)>,
+    /// Per pixel: already among the next pass's candidates (all false between passes).
+    seen: Vec<bool>,
+    /// [`refit`]: the moments of each label.
+    moments: Vec<Moments>,
+}
+
 /// Moves border pixels of `groups` (a label per pixel, 0 = none; `planes[l − 1]` is the plane of
-/// label `l`) to the 8-adjacent region whose plane is nearest their 3D point, when it is nearer
-/// than their own plane and within `limit` of it. At most `passes` passes: each is decided from
-/// the labels of the previous one only (ties keep the pixel where it is, then go to the smaller
-/// label), so the order of pixels does not matter; a border moves at most one pixel per pass.
-/// Returns the number of moves.
+/// label `l`) to the 8-adjacent region that fits them better (see `better_label`). At most
+/// `passes` passes: each is decided from the labels of the previous one only (ties keep the pixel
+/// where it is, then go to the smaller label), so the order of pixels does not matter; a border
+/// moves at most one pixel per pass. Returns the number of moves.
 pub(crate) fn refine(
     scene: &Scene<'_>,
     groups: &mut [u32],
-    planes: &[Option<Plane>],
+    planes: &[Plane],
     limit: Limit,
     passes: u32,
+    bufs: &mut Buffers,
 ) -> u32 {
     let (w, h) = (scene.w, scene.h);
+    let Buffers { cand, moves, seen, .. } = bufs;
+    seen.clear();
+    seen.resize(w * h, false);
     // Candidates of the first pass: every labelled pixel with a differently labelled 8-neighbour.
-    let mut cand: Vec<u32> = Vec::new();
+    cand.clear();
     for y in 0..h {
         for x in 0..w {
             let l = groups[y * w + x];
@@ -35,8 +51,6 @@ pub(crate) fn refine(
             }
         }
     }
-    let mut moves: Vec<(u32, u32)> = Vec::new();
-    let mut seen = vec![false; w * h];
     let mut total = 0u32;
     for _ in 0..passes {
         moves.clear();
@@ -47,14 +61,14 @@ pub(crate) fn refine(
         if moves.is_empty() {
             break;
         }
-        for &(i, l) in &moves {
+        for &(i, l) in moves.iter() {
             groups[i as usize] = l;
         }
         total += moves.len() as u32;
         // Next candidates: the moved pixels' labelled neighbours (their best plane may have come
         // next to them), each once, in raster order.
         cand.clear();
-        for &(i, _) in &moves {
+        for &(i, _) in moves.iter() {
             let i = i as usize;
             for_neighbours(i % w, i / w, w, h, |j, _, _| {
                 if groups[j] != 0 && !seen[j] {
@@ -64,7 +78,7 @@ pub(crate) fn refine(
             });
         }
         cand.sort_unstable();
-        for &j in &cand {
+        for &j in cand.iter() {
             seen[j as usize] = false;
         }
     }
@@ -72,10 +86,12 @@ pub(crate) fn refine(
     total
 }
 
-/// Planes fitted to every valid pixel of each label of `groups` (`n` labels; `None` for labels
-/// without pixels), moments summed in raster order.
-pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], n: usize) -> Vec<Option<Plane>> {
-    let mut moments = vec![Moments::default(); n];
+/// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
+/// moments summed in raster order; a label without pixels keeps its plane.
+pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], planes: &mut [Plane], bufs: &mut Buffers) {
+    let moments = &mut bufs.moments;
+    moments.clear();
+    moments.resize(planes.len(), Moments::default());
     for (i, &l) in groups.iter().enumerate() {
         if l != 0
             && let Some(p) = scene.point(i % scene.w, i / scene.w)
@@ -83,7 +99,11 @@ pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], n: usize) -> Vec<Option<P
             moments[l as usize - 1].add(p);
         }
     }
-    moments.iter().map(|m| (m.n > 0.0).then(|| fit_plane(m, scene.camera))).collect()
+    for (plane, m) in planes.iter_mut().zip(moments.iter()) {
+        if m.n > 0.0 {
+            *plane = fit_plane(m, scene.camera);
+        }
+    }
 }
 
 /// The label pixel `i` should move to, if an 8-adjacent region fits it better than its own (and
@@ -93,14 +113,14 @@ pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], n: usize) -> Vec<Option<P
 fn better_label(
     scene: &Scene<'_>,
     groups: &[u32],
-    planes: &[Option<Plane>],
+    planes: &[Plane],
     i: usize,
     limit: Limit,
 ) -> Option<u32> {
     let (w, h) = (scene.w, scene.h);
     let own = groups[i];
     let p = scene.point(i % w, i / w)?;
-    let plane_of = |l: u32| planes[l as usize - 1].as_ref().expect("labelled pixels belong to kept regions");
+    let plane_of = |l: u32| &planes[l as usize - 1];
     // The distinct labels around (own first) and how many of the 8 neighbours carry each.
     let mut labs = [(own, 0u32); 9];
     let mut n = 1;

@@ -365,6 +365,86 @@ fn geometry_abw(
     growable
 }
 
+/// [`geometry`] for a pinhole camera in default mode: per pixel the operations of [`Camera::point`] and of
+/// [`normal_with`] on [`PinholeProj`], in the same order and precision (bit-identical records, labels and
+/// count), with the Jacobian's per-column and per-row terms computed once and the point computed once (the
+/// general path computes it again for the direction toward the sensor), and no branch in the loop, so it
+/// vectorises.
+#[inline(always)] // into `run`, compiled for each instruction set
+#[allow(clippy::too_many_arguments)]
+fn geometry_pinhole(
+    [fx, fy, cx, cy, ds]: [f64; 5],
+    range: &[f32],
+    features: &SurfaceFeatures,
+    params: &Params,
+    (w, h): (usize, usize),
+    origin: [f64; 3],
+    (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
+) -> usize {
+    let pw = w + 2;
+    // Zeroed or the previous frame's (no fill pass); every interior record is written below, the frame here.
+    sized(geo, pw * (h + 2));
+    set_frame(geo, pw, [f32::NAN; 6]);
+    filled(labels, pw * (h + 2), BLOCKED);
+    let max_c = params.max_curvedness;
+    let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
+    let [o0, o1, o2] = origin;
+    // `x − cx` of the point, and `∂P/∂v`'s x term `(x − cx)·depth_scale / fx`.
+    let ux: Vec<f64> = (0..w).map(|x| x as f64 - cx).collect();
+    let jx: Vec<f64> = (0..w).map(|x| (x as f64 - cx) * ds / fx).collect();
+    let nan = f32::NAN;
+    let mut growable = 0usize;
+    for y in 0..h {
+        let uy = y as f64 - cy;
+        let jy = (y as f64 - cy) * ds / fy;
+        let (src, dst) = (y * w, (y + 1) * pw + 1);
+        let rrow = &range[src..src + w];
+        let crow = &features.curvedness.as_slice()[src..src + w];
+        let prow = &features.plane.as_slice()[src..src + w];
+        let grow_row = &mut geo[dst..dst + w];
+        let lrow = &mut labels[dst..dst + w];
+        let cols = ux.iter().zip(&jx).zip(grow_row.iter_mut().zip(lrow.iter_mut()));
+        for (((&v, pl), &c), ((&uxx, &jxx), (g, lab))) in rrow.iter().zip(prow).zip(crow).zip(cols) {
+            let fin = v.is_finite();
+            let vf = f64::from(v);
+            // Camera::point.
+            let z = vf * ds;
+            let p = [uxx * z / fx, uy * z / fy, z];
+            // normal_with: tangents ∂P/∂x + a·∂P/∂v and ∂P/∂y + b·∂P/∂v (the Jacobian's zeros kept as terms).
+            let (a, b) = (f64::from(pl[0]), f64::from(pl[1]));
+            let tx = [z / fx + a * jxx, 0.0 + a * jy, 0.0 + a * ds];
+            let ty = [0.0 + b * jxx, z / fy + b * jy, 0.0 + b * ds];
+            let n = cross(tx, ty);
+            let len = dot(n, n).sqrt();
+            let n = [n[0] / len, n[1] / len, n[2] / len];
+            // Camera::toward_sensor(p).
+            let d = [-p[0], -p[1], -p[2]];
+            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let toward = if dn > 0.0 { [d[0] / dn, d[1] / dn, d[2] / dn] } else { [0.0, 0.0, -1.0] };
+            let cs = dot(n, toward);
+            let n = if cs < 0.0 { [-n[0], -n[1], -n[2]] } else { n };
+            let ok = fin
+                & pl[0].is_finite()
+                & pl[1].is_finite()
+                & (c <= max_c)
+                & (len > 0.0)
+                & (len < f64::INFINITY);
+            let grow = ok & (cs.abs() >= cos_slant);
+            *g = [
+                if fin { (p[0] - o0) as f32 } else { nan },
+                if fin { (p[1] - o1) as f32 } else { nan },
+                if fin { (p[2] - o2) as f32 } else { nan },
+                if ok { n[0] as f32 } else { nan },
+                if ok { n[1] as f32 } else { nan },
+                if ok { n[2] as f32 } else { nan },
+            ];
+            *lab = if grow { 0 } else { BLOCKED };
+            growable += usize::from(grow);
+        }
+    }
+    growable
+}
+
 /// The stage on the buffers of `scratch`, writing `out` (whose grids are reused when of the right size).
 #[inline(always)] // into `isa::dispatch` in `grow`: compiled for each instruction set
 pub(crate) fn run(
@@ -444,6 +524,10 @@ fn padded_inputs(
         .unwrap_or([0.0; 3]);
     let growable = match *camera {
         Camera::Abw(cal) => geometry_abw(cal, r, features, params, (w, h), origin, (geo, labels)),
+        Camera::Pinhole { fx, fy, cx, cy, depth_scale } if !paper => {
+            let cam = [fx, fy, cx, cy, depth_scale];
+            geometry_pinhole(cam, r, features, params, (w, h), origin, (geo, labels))
+        }
         Camera::Pinhole { .. } => {
             geometry(&PinholeProj(*camera), r, features, params, (w, h), origin, (geo, labels))
         }
@@ -937,6 +1021,43 @@ mod tests {
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// The pinhole fast path equals the general path bit for bit: records, labels and count, with NaN and
+    /// infinite ranges and slopes, on a camera whose centre is off the image.
+    #[test]
+    fn pinhole_fast_geometry_is_bit_identical_to_the_general_path() {
+        let mut s = crate::testutil::abw_like_scene(96);
+        let (w, h) = (96usize, 96usize);
+        let r = s.range.as_mut_slice();
+        r[5] = f32::INFINITY;
+        r[17] = f32::NAN;
+        r[300] = 0.0;
+        let pl = s.features.plane.as_mut_slice();
+        pl[40][0] = f32::NAN;
+        pl[41][1] = f32::INFINITY;
+        pl[42] = [0.0, 0.0, 0.0];
+        pl[43][0] = -1e30;
+        for (fx, cx, ds) in [(525.0, 47.5, 0.001), (60.0, 130.0, 0.2), (80.0, -20.0, 1.0)] {
+            let cam = Camera::Pinhole { fx, fy: fx * 1.1, cx, cy: cx * 0.8, depth_scale: ds };
+            for params in
+                [Params::default(), Params { max_slant_deg: 40.0, max_curvedness: 0.05, ..Params::default() }]
+            {
+                let origin = cam.point(3.0, 5.0, 100.0).unwrap();
+                let (mut g0, mut l0, mut g1, mut l1) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                let n0 =
+                    geometry(&PinholeProj(cam), r, &s.features, &params, (w, h), origin, (&mut g0, &mut l0));
+                // A buffer of the previous frame, full of other values.
+                let mut g1b = vec![[7.0f32; 6]; g0.len()];
+                std::mem::swap(&mut g1, &mut g1b);
+                let cam5 = [fx, fx * 1.1, cx, cx * 0.8, ds];
+                let n1 = geometry_pinhole(cam5, r, &s.features, &params, (w, h), origin, (&mut g1, &mut l1));
+                assert_eq!((n0, &l0), (n1, &l1));
+                assert!(n0 > 100, "{n0} growable pixels");
+                let bits = |g: &[[f32; 6]]| g.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&g0), bits(&g1));
             }
         }
     }
