@@ -524,7 +524,7 @@ fn padded_inputs(
         .unwrap_or([0.0; 3]);
     let growable = match *camera {
         Camera::Abw(cal) => geometry_abw(cal, r, features, params, (w, h), origin, (geo, labels)),
-        Camera::Pinhole { fx, fy, cx, cy, depth_scale } if !paper => {
+        Camera::Pinhole { fx, fy, cx, cy, depth_scale } if params.mode != Mode::Paper => {
             let cam = [fx, fy, cx, cy, depth_scale];
             geometry_pinhole(cam, r, features, params, (w, h), origin, (geo, labels))
         }
