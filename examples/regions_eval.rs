@@ -165,7 +165,17 @@ fn missed_report(out: &mut impl Write, it: &Item, seg: &LabelImage) -> anyhow::R
     Ok(())
 }
 
-fn main() -> anyhow::Result<()> {
+/// The command line.
+struct Args {
+    split: String,
+    test: bool,
+    mode: Mode,
+    tune: bool,
+    seed: u64,
+    data: PathBuf,
+}
+
+fn parse_args() -> anyhow::Result<Args> {
     let mut split = String::from("train");
     let mut mode = Mode::Default;
     let mut tune = false;
@@ -195,14 +205,18 @@ fn main() -> anyhow::Result<()> {
         "test" => true,
         _ => bail!("--split train|test"),
     };
-    let mut out = std::io::stdout().lock();
-    let diag = std::env::var_os("REGIONS_EVAL_DIAG").is_some();
-    let base = if mode == Mode::Paper { Params::paper() } else { Params::default() };
-    let params = if tune {
-        let train = load(&data, false)?;
+    Ok(Args { split, test, mode, tune, seed, data })
+}
+
+/// The parameters to score: tuned on the training split (`--tune`), the mode's base parameters with the
+/// overrides of `REGIONS_EVAL_PARAMS`, or the base parameters.
+fn choose_params(out: &mut impl Write, args: &Args) -> anyhow::Result<Params> {
+    let base = if args.mode == Mode::Paper { Params::paper() } else { Params::default() };
+    if args.tune {
+        let train = load(&args.data, false)?;
         let mut best: Option<(f64, Params, Mean)> = None;
-        for p in grid(mode) {
-            let (m, _) = score(&train, &p, seed);
+        for p in grid(args.mode) {
+            let (m, _) = score(&train, &p, args.seed);
             let better = best.as_ref().is_none_or(|b| m.objective() > b.0);
             if better {
                 writeln!(
@@ -219,24 +233,32 @@ fn main() -> anyhow::Result<()> {
         }
         let (_, p, _) = best.context("empty grid")?;
         writeln!(out, "chosen on train:\n{}", toml::to_string(&p)?)?;
-        p
+        Ok(p)
     } else if let Some(extra) = std::env::var_os("REGIONS_EVAL_PARAMS") {
         // Overrides as a TOML table body, e.g. "seed_radius_px = 1" (exploration on train).
         let mut t: toml::Table = toml::from_str(&toml::to_string(&base)?)?;
         t.extend(toml::from_str::<toml::Table>(&extra.to_string_lossy())?);
         let p: Params = t.try_into()?;
         writeln!(out, "params: {p:?}")?;
-        p
+        Ok(p)
     } else {
-        base
-    };
-    let items = load(&data, test)?;
-    // Single-threaded wall time of `grow` per image (measurement only).
+        Ok(base)
+    }
+}
+
+/// Times `grow` on each image, one thread (measurement only); with `diag`, prints each image's `Info`.
+fn time_grow(
+    out: &mut impl Write,
+    items: &[Item],
+    params: &Params,
+    seed: u64,
+    diag: bool,
+) -> anyhow::Result<()> {
     let mut fastest = std::time::Duration::MAX;
     let mut total = std::time::Duration::ZERO;
-    for it in &items {
+    for it in items {
         let t0 = std::time::Instant::now();
-        let (_, info) = regiongrow::grow(&it.range, &it.features, &it.camera, &params, seed);
+        let (_, info) = regiongrow::grow(&it.range, &it.features, &it.camera, params, seed);
         let dt = t0.elapsed();
         fastest = fastest.min(dt);
         total += dt;
@@ -249,6 +271,17 @@ fn main() -> anyhow::Result<()> {
         "grow, one thread: mean {:.2?}, fastest {fastest:.2?} per image",
         total / items.len() as u32
     )?;
+    Ok(())
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = parse_args()?;
+    let (test, mode, seed) = (args.test, args.mode, args.seed);
+    let mut out = std::io::stdout().lock();
+    let diag = std::env::var_os("REGIONS_EVAL_DIAG").is_some();
+    let params = choose_params(&mut out, &args)?;
+    let items = load(&args.data, test)?;
+    time_grow(&mut out, &items, &params, seed, diag)?;
     if diag && !test {
         for it in &items {
             let (seg, _) = regiongrow::grow(&it.range, &it.features, &it.camera, &params, seed);
@@ -267,7 +300,8 @@ fn main() -> anyhow::Result<()> {
     }
     writeln!(
         out,
-        "\n{split} split, mode {mode:?}, {} images, T = 0.8, seed {seed} (grow+score {dt:.2?})",
+        "\n{} split, mode {mode:?}, {} images, T = 0.8, seed {seed} (grow+score {dt:.2?})",
+        args.split,
         items.len()
     )?;
     writeln!(

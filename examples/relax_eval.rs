@@ -120,7 +120,39 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-fn main() -> Result<()> {
+impl Row {
+    /// The figures the summaries average: F of C1, C2 and C; the paper's precision of C2, relaxed C2 and C;
+    /// Hoover correct detections of region growing and of the final segmentation; GT regions.
+    fn figures(&self) -> [f64; 9] {
+        [
+            self.f_c1,
+            self.f_c2,
+            self.f_final,
+            self.pp_c2,
+            self.pp_c2_relaxed,
+            self.pp_final,
+            f64::from(self.hoover_rg),
+            f64::from(self.hoover_final),
+            f64::from(self.gt_regions),
+        ]
+    }
+}
+
+/// The mean over images of each of [`Row::figures`].
+fn means(rows: &[Row]) -> [f64; 9] {
+    std::array::from_fn(|k| mean(rows.iter().map(|r| r.figures()[k])))
+}
+
+/// The command line: relax and final-segmentation parameters, and the options.
+struct Args {
+    params: relax::Params,
+    sp: finalseg::Params,
+    tune: bool,
+    use_k: bool,
+    seg_supported: bool,
+}
+
+fn parse_args() -> Result<Args> {
     let mut params = relax::Params::default();
     let mut sp = finalseg::Params::default();
     let (mut tune, mut use_k, mut seg_supported) = (false, false, false);
@@ -156,45 +188,31 @@ fn main() -> Result<()> {
     }
     params.validate()?;
     sp.validate()?;
-    let only: Option<u32> = match std::env::var("ONLY") {
-        Ok(v) => Some(v.parse().with_context(|| format!("ONLY={v:?}: not an image index"))?),
-        Err(_) => None,
-    };
-    let images: Vec<Prepared> = (0..10u32)
-        .filter(|i| only.is_none_or(|o| o == *i))
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map(|i| prepare(i, use_k))
-        .collect();
-    println!("s1 = {}", if use_k { "|K|" } else { "curvedness" });
-    if tune {
-        println!("t_d  lambda | F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG  final (of GT)");
-        for t_d in [1.5, 2.0, 3.0, 4.0] {
-            for lambda in [0.0, 0.3, 1.0, 3.0] {
-                let p = relax::Params { t_d_px: t_d, lambda, ..params.clone() };
-                let rows: Vec<Row> =
-                    images.par_iter().map(|im| evaluate(im, &p, &sp, seg_supported)).collect();
-                println!(
-                    "{t_d:<4} {lambda:<6} | {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:.2}  {:.2}  ({:.2})",
-                    mean(rows.iter().map(|r| r.f_c2)),
-                    mean(rows.iter().map(|r| r.f_final)),
-                    mean(rows.iter().map(|r| r.pp_c2)),
-                    mean(rows.iter().map(|r| r.pp_c2_relaxed)),
-                    mean(rows.iter().map(|r| r.pp_final)),
-                    mean(rows.iter().map(|r| f64::from(r.hoover_rg))),
-                    mean(rows.iter().map(|r| f64::from(r.hoover_final))),
-                    mean(rows.iter().map(|r| f64::from(r.gt_regions))),
-                );
-            }
+    Ok(Args { params, sp, tune, use_k, seg_supported })
+}
+
+/// `--tune`: one summary line per `t_d_px × lambda`.
+fn tune(images: &[Prepared], args: &Args) {
+    println!("t_d  lambda | F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG  final (of GT)");
+    for t_d in [1.5, 2.0, 3.0, 4.0] {
+        for lambda in [0.0, 0.3, 1.0, 3.0] {
+            let p = relax::Params { t_d_px: t_d, lambda, ..args.params.clone() };
+            let rows: Vec<Row> =
+                images.par_iter().map(|im| evaluate(im, &p, &args.sp, args.seg_supported)).collect();
+            let [_, f_c2, f_final, pp_c2, pp_c2_relaxed, pp_final, rg, fin, gt] = means(&rows);
+            println!(
+                "{t_d:<4} {lambda:<6} | {f_c2:.4} {f_final:.4} | {pp_c2:.4} {pp_c2_relaxed:.4}  {pp_final:.4} | {rg:.2}  {fin:.2}  ({gt:.2})"
+            );
         }
-        return Ok(());
     }
-    println!("relax params: {params:?}\nsegment params: {sp:?}");
+}
+
+/// One line per image, the means, and the Hoover counts of both final-segmentation modes.
+fn report(images: &[Prepared], rows: &[Row]) {
     println!(
         "image         | F(C1)  F(C2)  F(C)   | pp(C2) pp(C2') pp(C) | Hoover RG final /GT | #RG #fin | rm C1 rm C2 sweeps E0 -> E1"
     );
-    let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, &params, &sp, seg_supported)).collect();
-    for (im, r) in images.iter().zip(&rows) {
+    for (im, r) in images.iter().zip(rows) {
         println!(
             "{:<13} | {:.4} {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:>3} {:>3} /{:<3} | {:>3} {:>3} | {:>5} {:>5} {:>3} {:.0} -> {:.0}",
             im.stem,
@@ -216,21 +234,37 @@ fn main() -> Result<()> {
             r.info.energy_after,
         );
     }
+    let [f_c1, f_c2, f_final, pp_c2, pp_c2_relaxed, pp_final, rg, fin, _] = means(rows);
     println!(
-        "mean          | {:.4} {:.4} {:.4} | {:.4} {:.4}  {:.4} | {:.2} {:.2}",
-        mean(rows.iter().map(|r| r.f_c1)),
-        mean(rows.iter().map(|r| r.f_c2)),
-        mean(rows.iter().map(|r| r.f_final)),
-        mean(rows.iter().map(|r| r.pp_c2)),
-        mean(rows.iter().map(|r| r.pp_c2_relaxed)),
-        mean(rows.iter().map(|r| r.pp_final)),
-        mean(rows.iter().map(|r| f64::from(r.hoover_rg))),
-        mean(rows.iter().map(|r| f64::from(r.hoover_final))),
+        "mean          | {f_c1:.4} {f_c2:.4} {f_final:.4} | {pp_c2:.4} {pp_c2_relaxed:.4}  {pp_final:.4} | {rg:.2} {fin:.2}"
     );
     let h = |m: usize, k: usize| mean(rows.iter().map(|r| f64::from(r.hoover[m][k])));
     println!("Hoover T = 0.8, mean per image (correct / over / under):");
     for (m, name) in ["region growing", "final, components", "final, regions"].iter().enumerate() {
         println!("  {name:<18} {:.2} / {:.2} / {:.2}", h(m, 0), h(m, 1), h(m, 2));
     }
+}
+
+fn main() -> Result<()> {
+    let args = parse_args()?;
+    let only: Option<u32> = match std::env::var("ONLY") {
+        Ok(v) => Some(v.parse().with_context(|| format!("ONLY={v:?}: not an image index"))?),
+        Err(_) => None,
+    };
+    let images: Vec<Prepared> = (0..10u32)
+        .filter(|i| only.is_none_or(|o| o == *i))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|i| prepare(i, args.use_k))
+        .collect();
+    println!("s1 = {}", if args.use_k { "|K|" } else { "curvedness" });
+    if args.tune {
+        tune(&images, &args);
+        return Ok(());
+    }
+    let (params, sp) = (&args.params, &args.sp);
+    println!("relax params: {params:?}\nsegment params: {sp:?}");
+    let rows: Vec<Row> = images.par_iter().map(|im| evaluate(im, params, sp, args.seg_supported)).collect();
+    report(&images, &rows);
     Ok(())
 }

@@ -121,6 +121,7 @@ impl Config {
         c.segment.min_region_px = 50;
         // The specification fills every left-over pixel.
         c.segment.fill_max_residual = 0.0;
+        c.segment.refine_passes = 0;
         c
     }
 
@@ -421,6 +422,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.fill_rms_ratio",
         "The fill limit of a region is at least this × its RMS distance to its own plane (0 = fill_max_residual alone).",
+    ),
+    (
+        "segment.refine_passes",
+        "Passes moving border pixels to the adjacent region whose plane fits them better (0 = off).",
     ),
 ];
 

@@ -100,6 +100,7 @@ struct Scratch {
     regiongrow: regiongrow::Scratch,
     vcanny: vcanny::Scratch,
     relax: relax::Scratch,
+    finalseg: finalseg::Scratch,
 }
 
 impl Segmenter {
@@ -217,8 +218,15 @@ fn finish_into(
     // The segmentation sees both relaxed sets in full (before the support test): a border between
     // two faces that region growing merged has only C2 to show it.
     relax::union_into(&fin.relaxed.c1, &fin.relaxed.c2, &mut scratch.union);
-    (fin.labels, fin.final_regions) =
-        finalseg::segment(range, camera, &scratch.union, Some(&regions.labels), &config.segment);
+    finalseg::segment_into(
+        range,
+        camera,
+        &scratch.union,
+        Some(&regions.labels),
+        &config.segment,
+        &mut scratch.finalseg,
+        (&mut fin.labels, &mut fin.final_regions),
+    );
     match config.pipeline.final_edges {
         FinalEdges::Relaxed => fin.edges.copy_from(&fin.relaxed.edges),
         // The boundary rule eval scores segmentations by: region pixels next to another region, and

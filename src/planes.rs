@@ -45,8 +45,6 @@ struct Acc {
 /// If `labels` and `range` differ in size.
 pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
     assert_eq!(range.dimensions(), labels.dimensions(), "range and labels differ in size");
-    let (w, _) = labels.dimensions();
-    let w = w as usize;
     let ids = label_ids(labels);
     let empty = Acc {
         pixels: 0,
@@ -73,25 +71,23 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
         Some(&j) if !table.is_empty() => j as usize,
         _ => ids.binary_search(&l).expect("every label was collected"),
     };
-    let point = |i: usize, v: f32| camera.point((i % w) as f64, (i / w) as f64, f64::from(v));
-    let pixels = || range.as_slice().iter().zip(labels.as_slice()).enumerate().filter(|(_, (_, l))| **l != 0);
+    let point = |x: u32, y: u32, v: f32| camera.point(f64::from(x), f64::from(y), f64::from(v));
 
-    for (i, (&v, &l)) in pixels() {
+    for_labelled(range, labels, |x, y, v, l| {
         let a = &mut acc[index(l)];
-        let (x, y) = ((i % w) as u32, (i / w) as u32);
         a.pixels += 1;
         a.bbox = [a.bbox[0].min(x), a.bbox[1].min(y), a.bbox[2].max(x), a.bbox[3].max(y)];
-        if let Some(p) = point(i, v) {
+        if let Some(p) = point(x, y, v) {
             a.points += 1;
             for k in 0..3 {
                 a.sum[k] += p[k];
             }
         }
-    }
+    });
     let centroids: Vec<[f64; 3]> = acc.iter().map(|a| a.sum.map(|s| s / a.points as f64)).collect();
-    for (i, (&v, &l)) in pixels() {
+    for_labelled(range, labels, |x, y, v, l| {
         let j = index(l);
-        if let Some(p) = point(i, v) {
+        if let Some(p) = point(x, y, v) {
             let q = sub(p, centroids[j]);
             for r in 0..3 {
                 for c in r..3 {
@@ -99,7 +95,7 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
                 }
             }
         }
-    }
+    });
     let normals: Vec<[f64; 3]> = acc
         .iter()
         .zip(&centroids)
@@ -111,13 +107,13 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
             if dot(n, camera.toward_sensor(c)) < 0.0 { n.map(|v| -v) } else { n }
         })
         .collect();
-    for (i, (&v, &l)) in pixels() {
+    for_labelled(range, labels, |x, y, v, l| {
         let j = index(l);
-        if let Some(p) = point(i, v) {
+        if let Some(p) = point(x, y, v) {
             let r = dot(normals[j], sub(p, centroids[j]));
             acc[j].sq_residual += r * r;
         }
-    }
+    });
 
     ids.iter()
         .zip(acc)
@@ -132,6 +128,22 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
             bbox: a.bbox,
         })
         .collect()
+}
+
+/// Calls `f(x, y, range value, label)` for every labelled pixel in raster order (row by row: no division of
+/// the pixel index per pixel).
+#[inline(always)]
+fn for_labelled(range: &RangeImage, labels: &LabelImage, mut f: impl FnMut(u32, u32, f32, u32)) {
+    let w = (labels.width() as usize).max(1);
+    for ((rrow, lrow), y) in
+        range.as_slice().chunks_exact(w).zip(labels.as_slice().chunks_exact(w)).zip(0u32..)
+    {
+        for ((&v, &l), x) in rrow.iter().zip(lrow).zip(0u32..) {
+            if l != 0 {
+                f(x, y, v, l);
+            }
+        }
+    }
 }
 
 /// The distinct non-zero labels of `labels`, sorted: marked in a table up to the largest label when that is

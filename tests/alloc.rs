@@ -1,6 +1,5 @@
-//! `Segmenter` on a stream of frames: the stages before the final segmentation allocate nothing image-sized
-//! after the first frame (a counting global allocator in this test binary; the final segmentation does not
-//! reuse its buffers yet), and the output equals the one-shot `segment`'s.
+//! `Segmenter` on a stream of frames: after the first frame it allocates nothing image-sized, final segmentation
+//! included (a counting global allocator in this test binary), and the output equals the one-shot `segment`'s.
 #![allow(unsafe_code)]
 
 use rangeimage::{Camera, RangeImage};
@@ -123,8 +122,7 @@ fn assert_same(a: &Output, b: &Output) {
 }
 
 /// Runs `frames` through one segmenter (each frame twice, so a frame also follows itself) and checks that
-/// frames after the first give what `segment` gives and allocate nothing image-sized beyond what the final
-/// segmentation alone allocates on the same input (it has no reusable buffers yet).
+/// frames after the first give what `segment` gives and allocate nothing image-sized.
 /// The caller holds [`SERIAL`].
 fn stream(frames: &[RangeImage], camera: &Camera, config: &Config) {
     one_thread(|| stream_here(frames, camera, config));
@@ -140,15 +138,7 @@ fn stream_here(frames: &[RangeImage], camera: &Camera, config: &Config) {
         });
         let out = s.segment(f, camera);
         assert_same(out, &rangeseg::segment(f, camera, config));
-        let union = relax::union(&out.fin.relaxed.c1, &out.fin.relaxed.c2);
-        let guide = Some(&out.regions.labels);
-        let (_, n_final, _) = count_large(|| finalseg::segment(f, camera, &union, guide, &config.segment));
-        assert!(n_final > 0, "frame {i}: the final segmentation allocates (else this test should ask for 0)");
-        assert!(
-            n <= n_final,
-            "frame {i}: {n} allocations of ≥ {LARGE} bytes (the largest {largest} bytes), the final segmentation \
-             alone {n_final}"
-        );
+        assert_eq!(n, 0, "frame {i}: {n} allocations of ≥ {LARGE} bytes, the largest {largest} bytes");
     }
 }
 

@@ -21,6 +21,11 @@ const FORBIDDEN_FOR_STAGES: &[&str] = &[
     "image",
 ];
 
+/// Stages whose output later stages' tests and benches take as input: a stage may list them in
+/// `[dev-dependencies]` (to test on the real computation rather than a test-only copy of it), never in
+/// `[dependencies]`.
+const DEV_INPUTS_FOR_STAGES: &[&str] = &["features"];
+
 /// Runs every check and returns the problems found, one line each.
 pub fn problems(root: &Path) -> Result<Vec<String>> {
     let mut problems = Vec::new();
@@ -47,22 +52,33 @@ pub fn problems(root: &Path) -> Result<Vec<String>> {
         if !lints_ok {
             problems.push(format!("{}: missing `[lints] workspace = true`", rel(root, manifest)));
         }
-        let name = doc.get("package").and_then(|p| p.get("name")).and_then(|n| n.as_str()).unwrap_or("");
-        if STAGES.contains(&name) || SHARED.contains(&name) {
-            for table in ["dependencies", "dev-dependencies", "build-dependencies"] {
-                let Some(deps) = doc.get(table).and_then(|d| d.as_table()) else { continue };
-                for dep in deps.keys() {
-                    if FORBIDDEN_FOR_STAGES.contains(&dep.as_str()) && dep != name {
-                        problems.push(format!(
-                            "{}: stage crate {name} depends on {dep} in [{table}]; stages depend only on rangeimage",
-                            rel(root, manifest)
-                        ));
-                    }
-                }
-            }
+        for p in layering_problems(&doc) {
+            problems.push(format!("{}: {p}", rel(root, manifest)));
         }
     }
     Ok(problems)
+}
+
+/// The dependencies a stage or shared crate's manifest may not have (see [`FORBIDDEN_FOR_STAGES`]).
+fn layering_problems(doc: &toml::Table) -> Vec<String> {
+    let mut problems = Vec::new();
+    let name = doc.get("package").and_then(|p| p.get("name")).and_then(|n| n.as_str()).unwrap_or("");
+    if !(STAGES.contains(&name) || SHARED.contains(&name)) {
+        return problems;
+    }
+    for table in ["dependencies", "dev-dependencies", "build-dependencies"] {
+        let Some(deps) = doc.get(table).and_then(|d| d.as_table()) else { continue };
+        for dep in deps.keys().map(String::as_str) {
+            let dev_input =
+                table == "dev-dependencies" && STAGES.contains(&name) && DEV_INPUTS_FOR_STAGES.contains(&dep);
+            if FORBIDDEN_FOR_STAGES.contains(&dep) && dep != name && !dev_input {
+                problems.push(format!(
+                    "stage crate {name} depends on {dep} in [{table}]; stages depend only on rangeimage"
+                ));
+            }
+        }
+    }
+    problems
 }
 
 /// Runs `cargo xtask tidy`: prints the problems and fails if there are any.
@@ -106,6 +122,22 @@ fn rust_files(root: &Path) -> Result<Vec<PathBuf>> {
 
 #[cfg(test)]
 mod tests {
+    fn layering(manifest: &str) -> Vec<String> {
+        super::layering_problems(&toml::from_str(manifest).unwrap())
+    }
+
+    #[test]
+    fn stages_may_test_on_features_but_not_depend_on_it() {
+        let dev = "[package]\nname = \"regiongrow\"\n[dev-dependencies]\nfeatures = \"1\"\n";
+        assert_eq!(layering(dev), Vec::<String>::new());
+        let normal = "[package]\nname = \"regiongrow\"\n[dependencies]\nfeatures = \"1\"\n";
+        assert_eq!(layering(normal).len(), 1, "{:?}", layering(normal));
+        let other = "[package]\nname = \"relax\"\n[dev-dependencies]\nregiongrow = \"1\"\n";
+        assert_eq!(layering(other).len(), 1);
+        let shared = "[package]\nname = \"rangeimage\"\n[dev-dependencies]\nfeatures = \"1\"\n";
+        assert_eq!(layering(shared).len(), 1);
+    }
+
     #[test]
     fn tree_is_tidy() {
         let problems = super::problems(&crate::project_root()).unwrap();

@@ -6,10 +6,40 @@ use rangeimage::union_find::find;
 /// 4-connected components of the `core` pixels, two neighbours connected only if their
 /// `guide` labels are equal: (component per pixel, 0 = none, numbered from 1 in raster order
 /// of each component's first pixel; component sizes). Two-pass union-find labelling.
+#[cfg(test)]
 pub(crate) fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usize) -> (Vec<u32>, Vec<u32>) {
-    let mut lab = vec![0u32; w * h];
-    // Provisional labels from 1; parent[l] ≤ l, so roots are the smallest label of a set.
-    let mut parent: Vec<u32> = vec![0];
+    let (mut lab, mut sizes) = (Vec::new(), Vec::new());
+    components_into(core, guide, (w, h), &mut lab, &mut sizes, &mut Buffers::default());
+    (lab, sizes)
+}
+
+/// The union-find forest of [`components_into`], kept between frames.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// Parent of each provisional label.
+    parent: Vec<u32>,
+    /// Final component of each provisional label.
+    id: Vec<u32>,
+}
+
+/// [`components`] into `lab` and `sizes`, whose memory is reused like that of `bufs`.
+pub(crate) fn components_into(
+    core: &[bool],
+    guide: Option<&[u32]>,
+    (w, h): (usize, usize),
+    lab: &mut Vec<u32>,
+    sizes: &mut Vec<u32>,
+    bufs: &mut Buffers,
+) {
+    let n_px = w * h;
+    lab.clear();
+    lab.resize(n_px, 0);
+    // Provisional labels from 1; parent[l] ≤ l, so roots are the smallest label of a set. There is at most one
+    // per pixel (a run of one pixel each): the room is reserved once, and touched only as far as used.
+    let Buffers { parent, id } = bufs;
+    parent.clear();
+    parent.reserve(n_px + 1);
+    parent.push(0);
     // Runs of core pixels with one guide label; a run connects to the labels right above it.
     for y in 0..h {
         let row = y * w;
@@ -36,7 +66,7 @@ pub(crate) fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usiz
                     if guide.is_some_and(|gg| gg[row - w + x + k] != g) {
                         continue;
                     }
-                    let ru = find(&mut parent, u);
+                    let ru = find(parent, u);
                     l = if l == 0 || l == ru {
                         ru
                     } else {
@@ -58,7 +88,9 @@ pub(crate) fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usiz
     // raster order; so numbering the roots in label order numbers the components in raster
     // order of their first pixel. parent[l] < l for non-roots, so one ascending pass resolves
     // every label.
-    let mut id = vec![0u32; parent.len()];
+    id.clear();
+    id.reserve(n_px + 1);
+    id.resize(parent.len(), 0);
     let mut n = 0u32;
     for l in 1..parent.len() {
         let p = parent[l] as usize;
@@ -69,12 +101,13 @@ pub(crate) fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usiz
             id[p]
         };
     }
-    for l in &mut lab {
+    for l in lab.iter_mut() {
         *l = id[*l as usize];
     }
-    let mut sizes = vec![0u32; n as usize];
-    count_labels(&lab, &mut sizes);
-    (lab, sizes)
+    sizes.clear();
+    sizes.reserve(n_px);
+    sizes.resize(n as usize, 0);
+    count_labels(lab, sizes);
 }
 
 /// Adds the number of pixels of each label `l ≥ 1` to `sizes[l − 1]` (run by run, so that a

@@ -17,7 +17,7 @@ pub(crate) struct Limit {
 
 impl Limit {
     /// Whether a pixel at distance `res` from `plane` is too far to join it.
-    fn refuses(&self, res: f64, plane: &Plane) -> bool {
+    pub(crate) fn refuses(&self, res: f64, plane: &Plane) -> bool {
         self.max_residual > 0.0 && res > self.max_residual.max(self.rms_ratio * plane.rms)
     }
 }
@@ -25,12 +25,20 @@ impl Limit {
 /// Fills the unlabelled valid pixels of `comp` ring by ring (`planes[l − 1]` is the plane of label
 /// `l`). Each ring is decided from the labels of the previous rings only, so the order of pixels
 /// within a ring does not matter. A pixel beyond `limit` from its best plane stays 0 and grows no
-/// further ring.
-pub(crate) fn fill(scene: &Scene<'_>, comp: &mut [u32], planes: &[Option<Plane>], limit: Limit) {
-    let mut in_ring = vec![false; scene.w * scene.h];
-    let mut ring = first_ring(scene, comp, &mut in_ring);
-    let mut assign = Vec::new();
-    let mut next = Vec::new();
+/// further ring. `bufs` holds the working memory, reused from frame to frame.
+pub(crate) fn fill(scene: &Scene<'_>, comp: &mut [u32], planes: &[Plane], limit: Limit, bufs: &mut Buffers) {
+    let n = scene.w * scene.h;
+    let Buffers { in_ring, ring, next, assign } = bufs;
+    in_ring.clear();
+    in_ring.resize(n, false);
+    // A ring holds each pixel at most once: room for all, reserved once and touched only as far as used.
+    for v in [&mut *ring, &mut *next] {
+        v.clear();
+        v.reserve(n);
+    }
+    assign.clear();
+    assign.reserve(n);
+    first_ring(scene, comp, in_ring, ring);
     let mut rings = 0u32;
     while !ring.is_empty() {
         rings += 1;
@@ -38,19 +46,31 @@ pub(crate) fn fill(scene: &Scene<'_>, comp: &mut [u32], planes: &[Option<Plane>]
         assign.extend(
             ring.iter().map(|&(x, y)| best_label(scene, comp, planes, x as usize, y as usize, limit)),
         );
-        for (&(x, y), &l) in ring.iter().zip(&assign) {
+        for (&(x, y), &l) in ring.iter().zip(assign.iter()) {
             comp[y as usize * scene.w + x as usize] = l;
         }
-        next_ring(scene, comp, &ring, &assign, &mut in_ring, &mut next);
-        std::mem::swap(&mut ring, &mut next);
+        next_ring(scene, comp, ring, assign, in_ring, next);
+        std::mem::swap(ring, next);
     }
     tracing::debug!(components = planes.len(), rings, "filled");
 }
 
-/// The valid unlabelled pixels 8-adjacent to a labelled one, in raster order (marked in `in_ring`).
-fn first_ring(scene: &Scene<'_>, comp: &[u32], in_ring: &mut [bool]) -> Vec<(u32, u32)> {
+/// The working memory of [`fill`], kept between frames.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// Per pixel: whether it has been in a ring.
+    in_ring: Vec<bool>,
+    /// The current and the next ring.
+    ring: Vec<(u32, u32)>,
+    next: Vec<(u32, u32)>,
+    /// The label decided for each pixel of the current ring.
+    assign: Vec<u32>,
+}
+
+/// The valid unlabelled pixels 8-adjacent to a labelled one, in raster order (marked in `in_ring`), into the
+/// empty `ring`.
+fn first_ring(scene: &Scene<'_>, comp: &[u32], in_ring: &mut [bool], ring: &mut Vec<(u32, u32)>) {
     let (w, h, r) = (scene.w, scene.h, scene.range);
-    let mut ring: Vec<(u32, u32)> = Vec::new();
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
@@ -64,19 +84,11 @@ fn first_ring(scene: &Scene<'_>, comp: &[u32], in_ring: &mut [bool]) -> Vec<(u32
             }
         }
     }
-    ring
 }
 
 /// The label of the 8-adjacent region whose plane fits the ring pixel (x, y) best (ties to the
 /// smaller label), or 0 if that plane is beyond `limit`.
-fn best_label(
-    scene: &Scene<'_>,
-    comp: &[u32],
-    planes: &[Option<Plane>],
-    x: usize,
-    y: usize,
-    limit: Limit,
-) -> u32 {
+fn best_label(scene: &Scene<'_>, comp: &[u32], planes: &[Plane], x: usize, y: usize, limit: Limit) -> u32 {
     let p = scene.point(x, y).expect("ring pixels are valid");
     let mut best: Option<(f64, u32, &Plane)> = None;
     let mut last = 0u32;
@@ -86,7 +98,7 @@ fn best_label(
             return;
         }
         last = l;
-        let plane = planes[l as usize - 1].as_ref().expect("labelled pixels belong to kept regions");
+        let plane = &planes[l as usize - 1];
         let res = plane.residual(p);
         if best.is_none_or(|(br, bl, _)| res < br || (res == br && l < bl)) {
             best = Some((res, l, plane));
@@ -120,7 +132,7 @@ fn next_ring(
 
 /// Calls `f(index, x, y)` for every in-image 8-neighbour of (x, y).
 #[inline(always)]
-fn for_neighbours(x: usize, y: usize, w: usize, h: usize, mut f: impl FnMut(usize, usize, usize)) {
+pub(crate) fn for_neighbours(x: usize, y: usize, w: usize, h: usize, mut f: impl FnMut(usize, usize, usize)) {
     let i = y * w + x;
     if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
         f(i - w - 1, x - 1, y - 1);

@@ -8,10 +8,11 @@ mod fill;
 mod merge;
 mod params;
 mod plane;
+mod refine;
 
 pub use params::{Mode, Params};
 
-use components::{components, count_labels};
+use components::count_labels;
 use plane::{Plane, fit_plane};
 use planefit::Moments;
 use rangeimage::union_find::find;
@@ -43,6 +44,11 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    support, if their planes agree as above and, for a supported border, each piece's RMS
 ///    distance to the other's plane is at most `within_max_rms_ratio` times its own RMS: edges
 ///    inside a face split it only where the geometry changes.
+/// 5. Border refinement (`refine_passes` > 0): a border pixel farther than 2.5 noise scales
+///    from its own region's plane moves to the adjacent region whose plane fits it better (a
+///    Potts energy, so noise does not fray the border; within the fill limit), up to
+///    `refine_passes` passes of one pixel each, every pass decided from the previous one: a
+///    border that growth or an edge left off the crease moves to where the planes meet.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -60,6 +66,53 @@ pub fn segment(
     regions: Option<&LabelImage>,
     params: &Params,
 ) -> (LabelImage, Vec<Region>) {
+    let (mut labels, mut out) = (LabelImage::default(), Vec::new());
+    segment_into(range, camera, edges, regions, params, &mut Scratch::default(), (&mut labels, &mut out));
+    (labels, out)
+}
+
+/// The working memory of [`segment_into`], kept from one frame to the next (none of it carries a result).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    /// Step 1: the core mask and the row distances of its distance test.
+    core: Grid<bool>,
+    row_dist: Vec<u16>,
+    /// Step 1: the union-find forest of the components, and the size of each component.
+    components: components::Buffers,
+    sizes: Vec<u32>,
+    /// Steps 2–4: the new label of each component (0 = dropped), and per kept component its guide label,
+    /// moments and plane.
+    kept: Vec<u32>,
+    guide: Vec<u32>,
+    moments: Vec<Moments>,
+    planes: Vec<Plane>,
+    fill: fill::Buffers,
+    merge: merge::Buffers,
+    /// Step 5: the refinement's buffers and the planes refitted on the refined regions.
+    refine: refine::Buffers,
+    refitted: Vec<Plane>,
+    /// Steps 4–6: the merge forest, the root of each label, the final label of each root and the roots in
+    /// order of first pixel.
+    parent: Vec<u32>,
+    root: Vec<u32>,
+    map: Vec<u32>,
+    order: Vec<u32>,
+}
+
+/// [`segment`] into `labels` and `regions` (whose memory is reused), with the working memory of `scratch`: the
+/// same result, bit for bit, and no image-sized allocation once `scratch` has seen a frame of this size.
+///
+/// # Panics
+/// As [`segment`].
+pub fn segment_into(
+    range: &RangeImage,
+    camera: &Camera,
+    edges: &EdgeMap,
+    regions: Option<&LabelImage>,
+    params: &Params,
+    scratch: &mut Scratch,
+    (labels, out): (&mut LabelImage, &mut Vec<Region>),
+) {
     let _s = tracing::info_span!("final_segmentation", w = range.width(), h = range.height()).entered();
     assert!(range.same_size(edges), "finalseg::segment: range and edges differ in size");
     if let Some(l) = regions {
@@ -71,28 +124,72 @@ pub fn segment(
     };
     let (w, h) = (range.width() as usize, range.height() as usize);
     let scene = Scene { range: range.as_slice(), w, h, camera };
+    let Scratch {
+        core,
+        row_dist,
+        components: cbufs,
+        sizes,
+        kept,
+        guide: comp_guide,
+        moments,
+        planes,
+        fill: fbufs,
+        merge: mbufs,
+        refine: rbufs,
+        refitted,
+        parent,
+        root,
+        map,
+        order,
+    } = scratch;
 
     // 1. 4-connected components of core pixels (two neighbours connect only if their guide
-    //    labels agree), numbered in raster order of their first pixel.
-    let core = core_pixels(range, edges, guide, params);
-    let (comp, sizes) = components(&core, guide, w, h);
-    drop(core);
+    //    labels agree), numbered in raster order of their first pixel, into the memory of the output labels.
+    core_pixels(range, edges, guide, params, (row_dist, core));
+    let mut comp = std::mem::take(labels).into_vec();
+    components::components_into(core.as_slice(), guide, (w, h), &mut comp, sizes, cbufs);
 
     // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
-    let mut pieces = Pieces::fit(&scene, comp, &sizes, guide, params.min_region_px);
+    let mut pieces = Pieces {
+        comp,
+        guide: std::mem::take(comp_guide),
+        moments: std::mem::take(moments),
+        planes: std::mem::take(planes),
+    };
+    pieces.fit(&scene, sizes, kept, guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
-    fill::fill(&scene, &mut pieces.comp, &pieces.planes, limit);
+    fill::fill(&scene, &mut pieces.comp, &pieces.planes, limit, fbufs);
 
     // 4. Merge adjacent regions over unsupported borders with agreeing planes.
-    let mut parent: Vec<u32> = (0..=pieces.planes.len() as u32).collect();
+    parent.clear();
+    parent.extend(0..=pieces.planes.len() as u32);
     if guide.is_some() {
-        merge::merge_unsupported(&scene, edges, &mut pieces, &mut parent, params);
+        merge::merge_unsupported(&scene, edges, &mut pieces, parent, params, mbufs);
     }
 
-    // 5. Consecutive labels in raster order; region statistics.
-    pieces.relabel(&mut parent, w, h)
+    // 5. Border pixels to the adjacent plane that fits them best.
+    if params.refine_passes > 0 {
+        for l in &mut pieces.comp {
+            if *l != 0 {
+                *l = find(parent, *l);
+            }
+        }
+        // A second round against planes refitted on the refined regions: a plane that the
+        // misplaced pixels had tilted now lets the rest of them go. (The reported planes stay
+        // those of the core pixels.)
+        if refine::refine(&scene, &mut pieces.comp, &pieces.planes, limit, params.refine_passes, rbufs) > 0 {
+            refitted.clear();
+            refitted.extend_from_slice(&pieces.planes);
+            refine::refit(&scene, &pieces.comp, refitted, rbufs);
+            refine::refine(&scene, &mut pieces.comp, refitted, limit, params.refine_passes, rbufs);
+        }
+    }
+
+    // 6. Consecutive labels in raster order; region statistics.
+    pieces.relabel((parent, root, map, order), (w, h), (labels, out));
+    (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
 }
 
 /// The read-only inputs every step reads: the range values, the image size and the camera.
@@ -112,69 +209,95 @@ impl Scene<'_> {
     }
 }
 
-/// Core pixels: valid, not an edge pixel and not within `gap_close_px` of one (and, in `regions`
-/// mode with `unlabelled_core = false`, labelled in `guide`).
-fn core_pixels(range: &RangeImage, edges: &EdgeMap, guide: Option<&[u32]>, params: &Params) -> Vec<bool> {
-    let mut core: Vec<bool> = if params.gap_close_px > 0.0 {
-        rangeimage::distance::within(edges, params.gap_close_px).into_vec()
+/// Into `core`, the core pixels: valid, not an edge pixel and not within `gap_close_px` of one (and, in
+/// `regions` mode with `unlabelled_core = false`, labelled in `guide`); `row_dist` is the distance test's memory.
+fn core_pixels(
+    range: &RangeImage,
+    edges: &EdgeMap,
+    guide: Option<&[u32]>,
+    params: &Params,
+    (row_dist, core): (&mut Vec<u16>, &mut Grid<bool>),
+) {
+    if params.gap_close_px > 0.0 {
+        rangeimage::distance::within_into(edges, params.gap_close_px, row_dist, core);
     } else {
-        edges.as_slice().to_vec()
-    };
-    for (c, &v) in core.iter_mut().zip(range.as_slice()) {
+        core.copy_from(edges);
+    }
+    for (c, &v) in core.as_mut_slice().iter_mut().zip(range.as_slice()) {
         *c = !*c & v.is_finite();
     }
     if let (Some(g), false) = (guide, params.unlabelled_core) {
-        for (c, &l) in core.iter_mut().zip(g) {
+        for (c, &l) in core.as_mut_slice().iter_mut().zip(g) {
             *c &= l != 0;
         }
     }
-    core
 }
 
-/// The regions while they form (steps 2–5): a component per pixel (0 = none; label `l` indexes
-/// the per-component vectors at `l − 1`), and per component its region-growing label (0 without a
-/// guide), the moments of its core points and its plane (`None` for dropped components).
+/// The regions while they form (steps 2–5): a region per pixel (0 = none; label `l` indexes the per-region
+/// vectors at `l − 1`), and per region its region-growing label (0 without a guide), the moments of its core
+/// points and its plane.
 struct Pieces {
     comp: Vec<u32>,
     guide: Vec<u32>,
     moments: Vec<Moments>,
-    planes: Vec<Option<Plane>>,
+    planes: Vec<Plane>,
 }
 
 impl Pieces {
-    /// Step 2: drops the components of `comp` under `min_region_px` pixels and fits a plane to
-    /// every kept one.
+    /// Step 2: drops the components of `comp` (of sizes `sizes`) under `min_region_px` pixels, numbers the kept
+    /// ones consecutively in their order (`kept[c − 1]`, the new label of component `c`, 0 if dropped), and fits
+    /// a plane to each. The numbering keeps the order of the labels, so every later step (ties to the smaller
+    /// label, pairs in sorted order, union-find roots) decides as it would on the component numbers; and the
+    /// per-region vectors hold at most one entry per `min_region_px` pixels.
     fn fit(
+        &mut self,
         scene: &Scene<'_>,
-        mut comp: Vec<u32>,
         sizes: &[u32],
+        kept: &mut Vec<u32>,
         guide: Option<&[u32]>,
         min_region_px: u32,
-    ) -> Self {
+    ) {
         let (w, h) = (scene.w, scene.h);
-        let keep: Vec<bool> = sizes.iter().map(|&n| u64::from(n) >= u64::from(min_region_px)).collect();
-        // The region-growing label of each component (all its pixels share one; 0 without a guide).
-        let mut comp_guide = vec![0u32; sizes.len()];
-        if let Some(g) = guide {
-            for (&c, &l) in comp.iter().zip(g) {
-                if c != 0 {
-                    comp_guide[c as usize - 1] = l;
-                }
+        kept.clear();
+        kept.reserve(w * h);
+        let mut n_kept = 0u32;
+        kept.extend(sizes.iter().map(|&n| {
+            if u64::from(n) >= u64::from(min_region_px) {
+                n_kept += 1;
+                n_kept
+            } else {
+                0
             }
-        }
-        let mut moments: Vec<Moments> = vec![Moments::default(); sizes.len()];
+        }));
+        // Room for every region a frame of this size can keep, so later frames reuse the memory.
+        let room = (w * h) / (min_region_px.max(1) as usize) + 1;
+        let n = n_kept as usize;
+        // The region-growing label of each region (all its pixels share one; 0 without a guide).
+        self.guide.clear();
+        self.guide.reserve(room);
+        self.guide.resize(n, 0);
+        self.moments.clear();
+        self.moments.reserve(room);
+        self.moments.resize(n, Moments::default());
         // Runs of one component are summed in a local copy of its moments (the same additions in
         // the same order, but in registers).
         let mut cur = 0u32;
         let mut acc = Moments::default();
+        let moments = &mut self.moments;
         for y in 0..h {
-            for (x, c) in comp[y * w..(y + 1) * w].iter_mut().enumerate() {
+            let row = &mut self.comp[y * w..(y + 1) * w];
+            for (x, c) in row.iter_mut().enumerate() {
                 if *c == 0 {
                     continue;
                 }
-                if !keep[*c as usize - 1] {
-                    *c = 0;
-                } else if let Some(p) = scene.point(x, y) {
+                *c = kept[*c as usize - 1];
+                if *c == 0 {
+                    continue;
+                }
+                if let Some(g) = guide {
+                    self.guide[*c as usize - 1] = g[y * w + x];
+                }
+                if let Some(p) = scene.point(x, y) {
                     if *c != cur {
                         if cur != 0 {
                             moments[cur as usize - 1] = acc;
@@ -189,19 +312,32 @@ impl Pieces {
         if cur != 0 {
             moments[cur as usize - 1] = acc;
         }
-        let planes = moments.iter().zip(&keep).map(|(m, &k)| k.then(|| fit_plane(m, scene.camera))).collect();
-        Self { comp, guide: comp_guide, moments, planes }
+        self.planes.clear();
+        self.planes.reserve(room);
+        self.planes.extend(moments.iter().map(|m| fit_plane(m, scene.camera)));
     }
 
-    /// Step 5: the merged groups of `parent` numbered consecutively in raster order of their first
-    /// pixel, and their regions.
-    fn relabel(self, parent: &mut [u32], w: usize, h: usize) -> (LabelImage, Vec<Region>) {
-        let planes = self.planes;
-        let root: Vec<u32> = (0..=planes.len() as u32).map(|c| find(parent, c)).collect();
-        let mut map = vec![0u32; planes.len() + 1];
-        let mut order: Vec<u32> = Vec::new();
-        let mut labels = self.comp;
-        for l in &mut labels {
+    /// Step 5: into `labels` (the memory of `self.comp`) and `regions`, the merged groups of `parent` numbered
+    /// consecutively in raster order of their first pixel, and their regions; `root`, `map` and `order` are
+    /// working memory.
+    fn relabel(
+        &mut self,
+        (parent, root, map, order): (&mut [u32], &mut Vec<u32>, &mut Vec<u32>, &mut Vec<u32>),
+        (w, h): (usize, usize),
+        (labels, regions): (&mut LabelImage, &mut Vec<Region>),
+    ) {
+        let planes = &self.planes;
+        let n = planes.len();
+        root.clear();
+        root.reserve(n + 1);
+        root.extend((0..=n as u32).map(|c| find(parent, c)));
+        map.clear();
+        map.reserve(n + 1);
+        map.resize(n + 1, 0);
+        order.clear();
+        order.reserve(n);
+        let mut comp = std::mem::take(&mut self.comp);
+        for l in &mut comp {
             if *l == 0 {
                 continue;
             }
@@ -212,26 +348,23 @@ impl Pieces {
             }
             *l = map[c];
         }
-        let mut sizes = vec![0u32; order.len()];
-        count_labels(&labels, &mut sizes);
-        let regions = order
-            .iter()
-            .zip(&sizes)
-            .enumerate()
-            .map(|(k, (&c, &size_px))| {
-                let plane = planes[c as usize - 1].expect("kept region");
-                Region {
-                    label: k as u32 + 1,
-                    size_px,
-                    mean_k: f32::NAN,
-                    normal: plane.normal.map(|v| v as f32),
-                    offset: plane.offset as f32,
-                    rms_residual: plane.rms as f32,
-                }
-            })
-            .collect();
-        let labels = Grid::from_vec(w as u32, h as u32, labels).expect("size matches");
-        (labels, regions)
+        // The final sizes, counted into `root` (no longer needed).
+        root.clear();
+        root.resize(order.len(), 0);
+        count_labels(&comp, root);
+        regions.clear();
+        regions.extend(order.iter().zip(root.iter()).enumerate().map(|(k, (&c, &size_px))| {
+            let plane = planes[c as usize - 1];
+            Region {
+                label: k as u32 + 1,
+                size_px,
+                mean_k: f32::NAN,
+                normal: plane.normal.map(|v| v as f32),
+                offset: plane.offset as f32,
+                rms_residual: plane.rms as f32,
+            }
+        }));
+        *labels = Grid::from_vec(w as u32, h as u32, comp).expect("size matches");
     }
 }
 
@@ -297,6 +430,43 @@ mod tests {
             assert_eq!(labels[(5, 5)], want, "ratio {ratio}");
             assert_eq!(labels[(30, 20)], 0, "ratio {ratio}");
         }
+    }
+
+    /// A crease at x = 30 between v = 100 + 0.5x and a steep v = 115 + 8(x − 30), with the edge
+    /// line 3 px off it (x = 33): the left region's core holds two columns of the right plane.
+    /// Refinement moves them back to the plane they lie on; without it they stay.
+    #[test]
+    fn refinement_moves_a_displaced_border_to_the_crease() {
+        let range = Grid::from_fn(60, 30, |x, _| {
+            if x <= 30 { 100.0 + 0.5 * x as f32 } else { 115.0 + 8.0 * (x as f32 - 30.0) }
+        });
+        let edges = Grid::from_fn(60, 30, |x, _| x == 33);
+        let base = Params { min_region_px: 10, ..Params::default() };
+        let column = |p: &Params, x: u32| {
+            let (labels, _) = segment(&range, &Camera::Grid, &edges, None, p);
+            (0..30).map(|y| labels[(x, y)]).collect::<Vec<_>>()
+        };
+        let off = Params { refine_passes: 0, ..base.clone() };
+        assert!(column(&off, 32).iter().all(|&l| l == 1), "without refinement x = 32 stays left");
+        for x in 31..=32 {
+            assert!(column(&base, x).iter().all(|&l| l == 2), "x = {x} moves to the right plane");
+        }
+        for x in [0, 29, 30] {
+            assert!(column(&base, x).iter().all(|&l| l == 1), "x = {x} stays on the left plane");
+        }
+    }
+
+    /// A noisy plane split by an edge line: refinement leaves the border alone (no pixel is an
+    /// outlier of its own plane), so noise does not fray it.
+    #[test]
+    fn refinement_leaves_a_border_inside_one_noisy_plane() {
+        let noise = |x: u32, y: u32| (((x * 7919 + y * 104_729) % 13) as f32 - 6.0) * 0.15;
+        let range = Grid::from_fn(40, 30, |x, y| 100.0 + 0.5 * x as f32 + noise(x, y));
+        let edges = Grid::from_fn(40, 30, |x, _| x == 20);
+        let p = Params { min_region_px: 10, ..Params::default() };
+        let (with, _) = segment(&range, &Camera::Grid, &edges, None, &p);
+        let (without, _) = segment(&range, &Camera::Grid, &edges, None, &Params { refine_passes: 0, ..p });
+        assert_eq!(with, without);
     }
 
     #[test]
@@ -546,5 +716,49 @@ mod tests {
         assert!(Params { within_max_rms_ratio: 0.5, ..p.clone() }.validate().is_err());
         assert!(Params { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
         assert!(Params { merge_max_residual: f64::NAN, ..p }.validate().is_err());
+    }
+
+    /// A random scene: tilted planes in vertical bands with noise and NaN holes, random edge pixels plus
+    /// the band borders, region-growing labels in blocks (0 in places).
+    fn random_scene(w: u32, h: u32, seed: u64) -> (RangeImage, EdgeMap, LabelImage) {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed);
+        let bands = rng.random_range(2..6u32);
+        let slopes: Vec<(f32, f32)> =
+            (0..bands).map(|_| (rng.random_range(-2.0..2.0), rng.random_range(-1.0..1.0))).collect();
+        let band = |x: u32| (x * bands / w) as usize;
+        let range = Grid::from_fn(w, h, |x, y| {
+            let (a, b) = slopes[band(x)];
+            if (x * 7 + y * 3) % 53 == 0 { f32::NAN } else { 120.0 + a * x as f32 + b * y as f32 }
+        });
+        let range = range.map(|&v| v + rng.random_range(-0.3..0.3));
+        let edges = Grid::from_fn(w, h, |x, _| x > 0 && band(x) != band(x - 1));
+        let edges = edges.map(|&e| e || rng.random_bool(0.08));
+        let guide =
+            Grid::from_fn(w, h, |x, y| if (x / 9 + y / 13) % 5 == 0 { 0 } else { 1 + x / 17 + y / 11 });
+        (range, edges, guide)
+    }
+
+    /// One scratch through frames of varying sizes, modes and parameters gives what fresh memory gives.
+    #[test]
+    fn reused_scratch_gives_the_same_result() {
+        let mut scratch = Scratch::default();
+        let (mut labels, mut regions) = (LabelImage::default(), Vec::new());
+        let params = [
+            Params { min_region_px: 20, mode: Mode::Components, ..Params::default() },
+            Params { min_region_px: 5, gap_close_px: 1.5, ..regions_mode() },
+            Params { min_region_px: 30, fill_max_residual: 1.0, ..regions_mode() },
+        ];
+        for (k, (w, h)) in [(60u32, 40u32), (60, 40), (90, 30), (20, 70), (60, 40)].into_iter().enumerate() {
+            for (j, p) in params.iter().enumerate() {
+                let (range, edges, guide) = random_scene(w, h, (k * 3 + j) as u64);
+                let want = segment(&range, &Camera::Grid, &edges, Some(&guide), p);
+                assert!(!want.1.is_empty(), "frame {k}, params {j}: no region");
+                let out = (&mut labels, &mut regions);
+                segment_into(&range, &Camera::Grid, &edges, Some(&guide), p, &mut scratch, out);
+                assert_eq!(labels, want.0, "frame {k}, params {j}");
+                assert_eq!(format!("{regions:?}"), format!("{:?}", want.1), "frame {k}, params {j}");
+            }
+        }
     }
 }

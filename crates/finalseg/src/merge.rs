@@ -14,6 +14,7 @@ type Borders = BTreeMap<(u32, u32), (u32, u32)>;
 
 /// The merge candidates: adjacent pairs in sorted order, and whether each one's border is weakly
 /// supported (else it is a supported border inside one region-growing region).
+#[derive(Debug, Default)]
 struct Candidates {
     pairs: Vec<(u32, u32)>,
     weak: Vec<bool>,
@@ -39,31 +40,44 @@ pub(crate) fn merge_unsupported(
     pieces: &mut Pieces,
     parent: &mut [u32],
     params: &Params,
+    bufs: &mut Buffers,
 ) {
-    let near = near_edges(edges, scene.w, scene.h);
-    let borders = borders(&pieces.comp, &near, scene.w, scene.h);
-    let candidates = candidates(&borders, &pieces.guide, params);
+    let Buffers { hor, near, candidates } = bufs;
+    near_edges(edges, scene.w, scene.h, hor, near);
+    let borders = borders(&pieces.comp, near, scene.w, scene.h);
+    candidates_into(&borders, &pieces.guide, params, candidates);
     let test = PlaneTest {
         cos_max: params.merge_max_angle_deg.to_radians().cos(),
         r2: params.merge_max_residual * params.merge_max_residual,
         k2: params.within_max_rms_ratio * params.within_max_rms_ratio,
     };
-    let merges = merge_fixpoint(&candidates, &test, parent, &mut pieces.moments, &mut pieces.planes, scene);
+    let merges = merge_fixpoint(candidates, &test, parent, &mut pieces.moments, &mut pieces.planes, scene);
     tracing::debug!(pairs = borders.len(), candidates = candidates.pairs.len(), merges, "merged");
 }
 
-/// The pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR per row,
-/// then a vertical 3-high OR of those rows.
-fn near_edges(edges: &EdgeMap, w: usize, h: usize) -> Vec<bool> {
+/// The working memory of [`merge_unsupported`], kept between frames.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// Per pixel: the horizontal pass of [`near_edges`], and its result.
+    hor: Vec<bool>,
+    near: Vec<bool>,
+    candidates: Candidates,
+}
+
+/// Into `near`, the pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR
+/// per row (into `hor`), then a vertical 3-high OR of those rows.
+fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &mut Vec<bool>) {
     let ed = edges.as_slice();
-    let mut hor = ed.to_vec();
+    hor.clear();
+    hor.extend_from_slice(ed);
     for (hrow, erow) in hor.chunks_exact_mut(w.max(1)).zip(ed.chunks_exact(w.max(1))) {
         for x in 1..w {
             hrow[x] |= erow[x - 1];
             hrow[x - 1] |= erow[x];
         }
     }
-    let mut near = vec![false; w * h];
+    near.clear();
+    near.resize(w * h, false);
     for (y, nrow) in near.chunks_exact_mut(w.max(1)).enumerate() {
         for yy in y.saturating_sub(1)..(y + 2).min(h) {
             for (n, &v) in nrow.iter_mut().zip(&hor[yy * w..(yy + 1) * w]) {
@@ -71,7 +85,6 @@ fn near_edges(edges: &EdgeMap, w: usize, h: usize) -> Vec<bool> {
             }
         }
     }
-    near
 }
 
 /// The borders between adjacent components of `comp`, with their support by `near`.
@@ -105,19 +118,22 @@ fn borders(comp: &[u32], near: &[bool], w: usize, h: usize) -> Borders {
 
 /// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
 /// pieces of one region-growing region (`comp_guide[l − 1]` is the region-growing label of `l`).
-fn candidates(borders: &Borders, comp_guide: &[u32], params: &Params) -> Candidates {
-    let (pairs, weak) = borders
-        .iter()
-        .filter_map(|(&(a, b), &(n, s))| {
-            let weak = f64::from(s) < params.min_border_support * f64::from(n);
-            let same_region = params.merge_within_region && {
-                let g = comp_guide[a as usize - 1];
-                g != 0 && g == comp_guide[b as usize - 1]
-            };
-            (weak || same_region).then_some(((a, b), weak))
-        })
-        .unzip();
-    Candidates { pairs, weak }
+/// Into `out`, whose memory is reused.
+fn candidates_into(borders: &Borders, comp_guide: &[u32], params: &Params, out: &mut Candidates) {
+    let Candidates { pairs, weak } = out;
+    pairs.clear();
+    weak.clear();
+    for (pair, w) in borders.iter().filter_map(|(&(a, b), &(n, s))| {
+        let weak = f64::from(s) < params.min_border_support * f64::from(n);
+        let same_region = params.merge_within_region && {
+            let g = comp_guide[a as usize - 1];
+            g != 0 && g == comp_guide[b as usize - 1]
+        };
+        (weak || same_region).then_some(((a, b), weak))
+    }) {
+        pairs.push(pair);
+        weak.push(w);
+    }
 }
 
 /// Passes over the candidates in order, merging every pair whose current groups pass `test`
@@ -127,7 +143,7 @@ fn merge_fixpoint(
     test: &PlaneTest,
     parent: &mut [u32],
     moments: &mut [Moments],
-    planes: &mut [Option<Plane>],
+    planes: &mut [Plane],
     scene: &Scene<'_>,
 ) -> u32 {
     let mut merges = 0u32;
@@ -139,7 +155,7 @@ fn merge_fixpoint(
                 continue;
             }
             let (ia, ib) = (ra as usize - 1, rb as usize - 1);
-            let (pa, pb) = (planes[ia].expect("kept region"), planes[ib].expect("kept region"));
+            let (pa, pb) = (planes[ia], planes[ib]);
             if !test.agree(&pa, &pb, &moments[ia], &moments[ib], candidates.weak[k]) {
                 continue;
             }
@@ -147,7 +163,7 @@ fn merge_fixpoint(
             parent[other as usize] = root;
             let m = moments[other as usize - 1];
             moments[root as usize - 1].merge(&m);
-            planes[root as usize - 1] = Some(fit_plane(&moments[root as usize - 1], scene.camera));
+            planes[root as usize - 1] = fit_plane(&moments[root as usize - 1], scene.camera);
             changed = true;
             merges += 1;
         }

@@ -62,6 +62,12 @@ pub struct Params {
     /// multiple of the RMS distance of its core points to its plane (0 = `fill_max_residual` alone): a surface
     /// a plane fits only roughly (8-bit staircases, depth encodings that bend planes) keeps its pixels.
     pub fill_rms_ratio: f64,
+    /// Passes of border refinement after the merge: a pixel on a region border that its own plane
+    /// does not explain (farther than 2.5 noise scales) moves to the adjacent region whose plane
+    /// fits it better (a Potts energy: squared distance in noise units plus a cost per disagreeing
+    /// neighbour; within the fill limit). A border moves at most one pixel per pass; 0 = off
+    /// (borders stay where growth and edges put them, the specification taken literally).
+    pub refine_passes: u32,
 }
 
 impl Default for Params {
@@ -78,6 +84,7 @@ impl Default for Params {
             merge_max_residual: 2.0,
             fill_max_residual: 3.0,
             fill_rms_ratio: 3.0,
+            refine_passes: 10,
         }
     }
 }

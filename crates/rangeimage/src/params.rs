@@ -18,7 +18,12 @@ impl ParamError {
     }
 
     /// Checks that `value` lies in `lo..=hi` (so is not NaN): "`field` must be in lo..=hi, got value".
-    pub fn in_range(field: &'static str, value: f64, lo: f64, hi: f64) -> Result<(), Self> {
+    pub fn in_range<T: PartialOrd + std::fmt::Display + Copy>(
+        field: &'static str,
+        value: T,
+        lo: T,
+        hi: T,
+    ) -> Result<(), Self> {
         if (lo..=hi).contains(&value) {
             Ok(())
         } else {
@@ -43,6 +48,14 @@ mod tests {
     #[test]
     fn range_checks_reject_nan_and_name_the_bounds() {
         assert_eq!(ParamError::in_range("a.b", 1.0, 0.0, 1.0), Ok(()));
+        assert_eq!(
+            ParamError::in_range("a.i", 17u32, 0, 16).unwrap_err().to_string(),
+            "a.i must be in 0..=16, got 17"
+        );
+        assert_eq!(
+            ParamError::in_range("a.f", 90.5f32, 0.0, 90.0).unwrap_err().to_string(),
+            "a.f must be in 0..=90, got 90.5"
+        );
         let e = ParamError::in_range("a.b", f64::NAN, 0.0, 64.0).unwrap_err();
         assert_eq!(e.to_string(), "a.b must be in 0..=64, got NaN");
         assert_eq!(ParamError::at_least("a.c", 2.5, 1.0), Ok(()));

@@ -365,6 +365,86 @@ fn geometry_abw(
     growable
 }
 
+/// [`geometry`] for a pinhole camera in default mode: per pixel the operations of [`Camera::point`] and of
+/// [`normal_with`] on [`PinholeProj`], in the same order and precision (bit-identical records, labels and
+/// count), with the Jacobian's per-column and per-row terms computed once and the point computed once (the
+/// general path computes it again for the direction toward the sensor), and no branch in the loop, so it
+/// vectorises.
+#[inline(always)] // into `run`, compiled for each instruction set
+#[allow(clippy::too_many_arguments)]
+fn geometry_pinhole(
+    [fx, fy, cx, cy, ds]: [f64; 5],
+    range: &[f32],
+    features: &SurfaceFeatures,
+    params: &Params,
+    (w, h): (usize, usize),
+    origin: [f64; 3],
+    (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
+) -> usize {
+    let pw = w + 2;
+    // Zeroed or the previous frame's (no fill pass); every interior record is written below, the frame here.
+    sized(geo, pw * (h + 2));
+    set_frame(geo, pw, [f32::NAN; 6]);
+    filled(labels, pw * (h + 2), BLOCKED);
+    let max_c = params.max_curvedness;
+    let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
+    let [o0, o1, o2] = origin;
+    // `x − cx` of the point, and `∂P/∂v`'s x term `(x − cx)·depth_scale / fx`.
+    let ux: Vec<f64> = (0..w).map(|x| x as f64 - cx).collect();
+    let jx: Vec<f64> = (0..w).map(|x| (x as f64 - cx) * ds / fx).collect();
+    let nan = f32::NAN;
+    let mut growable = 0usize;
+    for y in 0..h {
+        let uy = y as f64 - cy;
+        let jy = (y as f64 - cy) * ds / fy;
+        let (src, dst) = (y * w, (y + 1) * pw + 1);
+        let rrow = &range[src..src + w];
+        let crow = &features.curvedness.as_slice()[src..src + w];
+        let prow = &features.plane.as_slice()[src..src + w];
+        let grow_row = &mut geo[dst..dst + w];
+        let lrow = &mut labels[dst..dst + w];
+        let cols = ux.iter().zip(&jx).zip(grow_row.iter_mut().zip(lrow.iter_mut()));
+        for (((&v, pl), &c), ((&uxx, &jxx), (g, lab))) in rrow.iter().zip(prow).zip(crow).zip(cols) {
+            let fin = v.is_finite();
+            let vf = f64::from(v);
+            // Camera::point.
+            let z = vf * ds;
+            let p = [uxx * z / fx, uy * z / fy, z];
+            // normal_with: tangents ∂P/∂x + a·∂P/∂v and ∂P/∂y + b·∂P/∂v (the Jacobian's zeros kept as terms).
+            let (a, b) = (f64::from(pl[0]), f64::from(pl[1]));
+            let tx = [z / fx + a * jxx, 0.0 + a * jy, 0.0 + a * ds];
+            let ty = [0.0 + b * jxx, z / fy + b * jy, 0.0 + b * ds];
+            let n = cross(tx, ty);
+            let len = dot(n, n).sqrt();
+            let n = [n[0] / len, n[1] / len, n[2] / len];
+            // Camera::toward_sensor(p).
+            let d = [-p[0], -p[1], -p[2]];
+            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let toward = if dn > 0.0 { [d[0] / dn, d[1] / dn, d[2] / dn] } else { [0.0, 0.0, -1.0] };
+            let cs = dot(n, toward);
+            let n = if cs < 0.0 { [-n[0], -n[1], -n[2]] } else { n };
+            let ok = fin
+                & pl[0].is_finite()
+                & pl[1].is_finite()
+                & (c <= max_c)
+                & (len > 0.0)
+                & (len < f64::INFINITY);
+            let grow = ok & (cs.abs() >= cos_slant);
+            *g = [
+                if fin { (p[0] - o0) as f32 } else { nan },
+                if fin { (p[1] - o1) as f32 } else { nan },
+                if fin { (p[2] - o2) as f32 } else { nan },
+                if ok { n[0] as f32 } else { nan },
+                if ok { n[1] as f32 } else { nan },
+                if ok { n[2] as f32 } else { nan },
+            ];
+            *lab = if grow { 0 } else { BLOCKED };
+            growable += usize::from(grow);
+        }
+    }
+    growable
+}
+
 /// The stage on the buffers of `scratch`, writing `out` (whose grids are reused when of the right size).
 #[inline(always)] // into `isa::dispatch` in `grow`: compiled for each instruction set
 pub(crate) fn run(
@@ -377,27 +457,9 @@ pub(crate) fn run(
     out_seg: &mut Segmentation,
 ) -> Info {
     let Scratch { geo, labels, k, queue, cand, merge: mbufs, fill_planes } = scratch;
-    let (wu, hu) = range.dimensions();
-    let (w, h) = (wu as usize, hu as usize);
+    let (w, h) = (range.width() as usize, range.height() as usize);
     let n = w * h;
-    let r = range.as_slice();
-    let paper = params.mode == Mode::Paper;
-    let k_std = features.k_std.as_slice();
-    let pw = w + 2;
-    let pn = pw * (h + 2);
-
-    // 3D points relative to the first valid pixel's point (keeps f32 storage and f64 sums exact enough).
-    let origin = (0..n)
-        .find(|&i| r[i].is_finite())
-        .and_then(|i| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i])))
-        .unwrap_or([0.0; 3]);
-    let growable = match *camera {
-        Camera::Abw(cal) => geometry_abw(cal, r, features, params, (w, h), origin, (geo, labels)),
-        Camera::Pinhole { .. } => {
-            geometry(&PinholeProj(*camera), r, features, params, (w, h), origin, (geo, labels))
-        }
-        Camera::Grid => geometry(&GridProj, r, features, params, (w, h), origin, (geo, labels)),
-    };
+    let (origin, growable) = padded_inputs(range, features, camera, params, (geo, labels, k));
     let labels = &mut labels[..];
     // The per-label vectors get room for every label a frame of this size can have (memory that is reserved,
     // and touched only as far as used), so frames with more regions than the first reuse them too.
@@ -405,27 +467,105 @@ pub(crate) fn run(
     mbufs.reserve(max_labels);
     fill_planes.clear();
     fill_planes.reserve(max_labels);
-    sized(k, pn);
-    set_frame(k, pw, f32::NAN);
-    for (y, row) in features.k.rows().enumerate() {
-        let dst = (y + 1) * pw + 1;
-        k[dst..dst + w].copy_from_slice(row);
-    }
+    let pw = w + 2;
     let p = pw as isize;
     let offs = [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1];
     let ctx =
         Ctx { w, h, pw, offs, eight: params.connectivity == 8, geo: &geo[..], k: &k[..], origin, camera };
 
-    // Seeds: random draws without replacement among the candidates, grown one after the other.
     let mut info = Info::default();
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     queue.clear();
     queue.reserve(n);
+    let k_std = features.k_std.as_slice();
+    let next = seed_and_grow(&ctx, params, seed, k_std, growable, (labels, queue, cand), &mut info);
+
+    // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
+    let toward = |p: [f64; 3]| ctx.toward(p);
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+    info.n_merged = merged.n_merged;
+    info.n_merge_passes = merged.n_passes;
+    tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
+
+    let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
+    info.n_dropped = n_dropped;
+    if params.fill_unlabelled {
+        info.n_filled_px = fill(&ctx, params, (&mbufs.stats, &used), labels, queue, fill_planes);
+        if params.merge_after_fill && info.n_filled_px > 0 {
+            // Regions that a band of non-growable pixels kept apart touch now: merge again.
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+            info.n_merged += again.n_merged;
+            info.n_merge_passes += again.n_passes;
+        }
+    }
+
+    (info.n_regions, info.n_unlabelled_valid_px) =
+        relabel_into(&ctx, range, labels, next, &mut mbufs.stats, out_seg);
+    borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
+    tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
+    info
+}
+
+/// Fills the padded buffers `(geo, labels, k)` of `run` (see [`geometry`]; K with a NaN frame) and returns the
+/// origin of the 3D points, the point of the first valid pixel (relative points keep f32 storage and f64 sums
+/// exact enough), and the number of growable pixels.
+#[inline(always)] // into `run`, compiled for each instruction set
+fn padded_inputs(
+    range: &RangeImage,
+    features: &SurfaceFeatures,
+    camera: &Camera,
+    params: &Params,
+    (geo, labels, k): (&mut Vec<[f32; 6]>, &mut Vec<u32>, &mut Vec<f32>),
+) -> ([f64; 3], usize) {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let r = range.as_slice();
+    let origin = (0..w * h)
+        .find(|&i| r[i].is_finite())
+        .and_then(|i| camera.point((i % w) as f64, (i / w) as f64, f64::from(r[i])))
+        .unwrap_or([0.0; 3]);
+    let growable = match *camera {
+        Camera::Abw(cal) => geometry_abw(cal, r, features, params, (w, h), origin, (geo, labels)),
+        Camera::Pinhole { fx, fy, cx, cy, depth_scale } if !paper => {
+            let cam = [fx, fy, cx, cy, depth_scale];
+            geometry_pinhole(cam, r, features, params, (w, h), origin, (geo, labels))
+        }
+        Camera::Pinhole { .. } => {
+            geometry(&PinholeProj(*camera), r, features, params, (w, h), origin, (geo, labels))
+        }
+        Camera::Grid => geometry(&GridProj, r, features, params, (w, h), origin, (geo, labels)),
+    };
+    let pw = w + 2;
+    sized(k, pw * (h + 2));
+    set_frame(k, pw, f32::NAN);
+    for (y, row) in features.k.rows().enumerate() {
+        let dst = (y + 1) * pw + 1;
+        k[dst..dst + w].copy_from_slice(row);
+    }
+    (origin, growable)
+}
+
+/// Seeds and grows the regions: random draws without replacement among the candidates (pixels on the seed
+/// stride whose `k_std` is at most the round's threshold), grown one after the other, with the threshold
+/// doubled for another round while too few seeds were found. `growable` pixels are unlabelled at the start;
+/// seeding stops when fewer than a kept region remain. Leaves the non-growable pixels at 0 (unlabelled) and
+/// returns the next free label.
+#[inline(always)] // into `run`, compiled for each instruction set
+fn seed_and_grow(
+    ctx: &Ctx<'_>,
+    params: &Params,
+    seed: u64,
+    k_std: &[f32],
+    growable: usize,
+    (labels, queue, cand): (&mut [u32], &mut Vec<u32>, &mut Vec<u32>),
+    info: &mut Info,
+) -> u32 {
+    let (w, h) = (ctx.w, ctx.h);
+    let paper = params.mode == Mode::Paper;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut t = params.t_sigma;
     let mut next = 1u32;
     let stride = params.seed_stride_px as usize;
     let off = stride / 2;
-    // Unlabelled growable pixels left; seeding stops when fewer than a kept region remain.
+    // Unlabelled growable pixels left.
     let mut left = growable;
     let min_left = (params.min_region_px as usize).max(1);
     for round in 0..=MAX_RELAXATIONS {
@@ -453,14 +593,14 @@ pub(crate) fn run(
             }
             info.n_draws += 1;
             let c = c as usize;
-            if labels[c] != 0 || !seed_ok(&ctx, params, c, radius, labels) {
+            if labels[c] != 0 || !seed_ok(ctx, params, c, radius, labels) {
                 continue;
             }
             let grown = match (paper, ctx.eight) {
-                (true, false) => grow_paper::<4>(&ctx, params, c, next, labels, queue),
-                (true, true) => grow_paper::<8>(&ctx, params, c, next, labels, queue),
-                (false, false) => grow_default::<4>(&ctx, params, c, next, labels, queue),
-                (false, true) => grow_default::<8>(&ctx, params, c, next, labels, queue),
+                (true, false) => grow_paper::<4>(ctx, params, c, next, labels, queue),
+                (true, true) => grow_paper::<8>(ctx, params, c, next, labels, queue),
+                (false, false) => grow_default::<4>(ctx, params, c, next, labels, queue),
+                (false, true) => grow_default::<8>(ctx, params, c, next, labels, queue),
             };
             left -= grown;
             next += 1;
@@ -480,17 +620,12 @@ pub(crate) fn run(
             *l = 0;
         }
     }
+    next
+}
 
-    // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
-    let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
-    info.n_merged = merged.n_merged;
-    info.n_merge_passes = merged.n_passes;
-    let stats = &mbufs.stats;
-    tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
-
-    // Drop small regions.
-    let min = params.min_region_px;
+/// Unlabels the regions of fewer than `min` pixels. Returns which labels are still in the image and how many
+/// were dropped.
+fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
     let mut keep = vec![false; stats.len()];
     for (l, s) in stats.iter().enumerate().skip(1) {
         // Only roots still carry their pixels; merged-away labels no longer occur in `labels`.
@@ -505,49 +640,45 @@ pub(crate) fn run(
             }
         }
     }
-    info.n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
-    // The labels still in the image.
-    let used: Vec<bool> = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
+    let n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
+    let used = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
+    (used, n_dropped)
+}
 
-    if params.fill_unlabelled {
-        info.n_filled_px = fill(&ctx, params, (stats, &used), labels, queue, fill_planes);
-        if params.merge_after_fill && info.n_filled_px > 0 {
-            // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
-            info.n_merged += again.n_merged;
-            info.n_merge_passes += again.n_passes;
-        }
-    }
-
-    // Final statistics under the current labels, then relabel 1..n in raster order of first
-    // pixel while copying out of the padded grid (one pass).
-    region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut mbufs.stats);
-    let stats = &mbufs.stats;
+/// Final statistics under the current labels (labels below `next`), then the labels relabelled 1..n in raster
+/// order of first pixel while copied out of the padded grid into `out_seg.labels` (one pass), and the region
+/// records. Returns the number of regions and of valid pixels left unlabelled.
+fn relabel_into(
+    ctx: &Ctx<'_>,
+    range: &RangeImage,
+    labels: &[u32],
+    next: u32,
+    stats: &mut Vec<Stats>,
+    out_seg: &mut Segmentation,
+) -> (u32, u32) {
+    let (w, h) = (ctx.w, ctx.h);
+    region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats);
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];
     for (new, &old) in order.iter().enumerate() {
         map[old as usize] = new as u32 + 1;
     }
-    let n_regions = order.len() as u32;
-    info.n_regions = n_regions;
     out_seg.regions.clear();
-    out_seg.regions.extend(order.iter().zip(1..).map(|(&old, l)| region_of(&ctx, l, &stats[old as usize])));
+    out_seg.regions.extend(order.iter().zip(1..).map(|(&old, l)| region_of(ctx, l, &stats[old as usize])));
     let mut out = std::mem::take(&mut out_seg.labels).into_vec();
     out.clear();
-    out.reserve(n);
+    out.reserve(w * h);
     let mut unlabelled = 0u32;
-    for (y, rrow) in r.chunks_exact(w.max(1)).take(h).enumerate() {
+    for (y, rrow) in range.as_slice().chunks_exact(w.max(1)).take(h).enumerate() {
         let src = ctx.pad(0, y);
         let lrow = &labels[src..src + w];
         out.extend(lrow.iter().map(|&l| map[l as usize]));
         unlabelled += lrow.iter().zip(rrow).map(|(&l, v)| u32::from(l == 0 && v.is_finite())).sum::<u32>();
     }
-    info.n_unlabelled_valid_px = unlabelled;
+    let (wu, hu) = range.dimensions();
     out_seg.labels = Grid::from_vec(wu, hu, out).expect("same size");
-    borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
-    tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
-    info
+    (order.len() as u32, unlabelled)
 }
 
 /// Unit normal (toward the sensor) of the local plane with slopes `(a, b)` (range units per
@@ -890,6 +1021,43 @@ mod tests {
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// The pinhole fast path equals the general path bit for bit: records, labels and count, with NaN and
+    /// infinite ranges and slopes, on a camera whose centre is off the image.
+    #[test]
+    fn pinhole_fast_geometry_is_bit_identical_to_the_general_path() {
+        let mut s = crate::testutil::abw_like_scene(96);
+        let (w, h) = (96usize, 96usize);
+        let r = s.range.as_mut_slice();
+        r[5] = f32::INFINITY;
+        r[17] = f32::NAN;
+        r[300] = 0.0;
+        let pl = s.features.plane.as_mut_slice();
+        pl[40][0] = f32::NAN;
+        pl[41][1] = f32::INFINITY;
+        pl[42] = [0.0, 0.0, 0.0];
+        pl[43][0] = -1e30;
+        for (fx, cx, ds) in [(525.0, 47.5, 0.001), (60.0, 130.0, 0.2), (80.0, -20.0, 1.0)] {
+            let cam = Camera::Pinhole { fx, fy: fx * 1.1, cx, cy: cx * 0.8, depth_scale: ds };
+            for params in
+                [Params::default(), Params { max_slant_deg: 40.0, max_curvedness: 0.05, ..Params::default() }]
+            {
+                let origin = cam.point(3.0, 5.0, 100.0).unwrap();
+                let (mut g0, mut l0, mut g1, mut l1) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                let n0 =
+                    geometry(&PinholeProj(cam), r, &s.features, &params, (w, h), origin, (&mut g0, &mut l0));
+                // A buffer of the previous frame, full of other values.
+                let mut g1b = vec![[7.0f32; 6]; g0.len()];
+                std::mem::swap(&mut g1, &mut g1b);
+                let cam5 = [fx, fx * 1.1, cx, cx * 0.8, ds];
+                let n1 = geometry_pinhole(cam5, r, &s.features, &params, (w, h), origin, (&mut g1, &mut l1));
+                assert_eq!((n0, &l0), (n1, &l1));
+                assert!(n0 > 100, "{n0} growable pixels");
+                let bits = |g: &[[f32; 6]]| g.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&g0), bits(&g1));
             }
         }
     }

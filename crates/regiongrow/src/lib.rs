@@ -200,22 +200,17 @@ impl Params {
                 return Err(ParamError::new(name, format!("must be a number ≥ 0, got {v}")));
             }
         }
+        ParamError::in_range("regiongrow.max_angle_deg", self.max_angle_deg, 0.0, 180.0)?;
+        ParamError::in_range("regiongrow.merge_max_angle_deg", self.merge_max_angle_deg, 0.0, 180.0)?;
+        ParamError::in_range("regiongrow.max_slant_deg", self.max_slant_deg, 0.0, 90.0)?;
         for (name, v) in [
-            ("regiongrow.max_angle_deg", self.max_angle_deg),
-            ("regiongrow.merge_max_angle_deg", self.merge_max_angle_deg),
+            ("regiongrow.max_seeds", self.max_seeds),
+            ("regiongrow.seed_stride_px", self.seed_stride_px),
+            ("regiongrow.refit_every_px", self.refit_every_px),
         ] {
-            if !(0.0..=180.0).contains(&v) {
-                return Err(ParamError::new(name, format!("must be in 0..=180, got {v}")));
+            if v == 0 {
+                return Err(ParamError::new(name, "must be ≥ 1"));
             }
-        }
-        if !(0.0..=90.0).contains(&self.max_slant_deg) {
-            return Err(ParamError::new(
-                "regiongrow.max_slant_deg",
-                format!("must be in 0..=90, got {}", self.max_slant_deg),
-            ));
-        }
-        if self.max_seeds == 0 {
-            return Err(ParamError::new("regiongrow.max_seeds", "must be ≥ 1"));
         }
         if self.min_seeds > self.max_seeds {
             return Err(ParamError::new(
@@ -223,24 +218,13 @@ impl Params {
                 format!("({}) must be ≤ max_seeds ({})", self.min_seeds, self.max_seeds),
             ));
         }
-        if self.seed_stride_px == 0 {
-            return Err(ParamError::new("regiongrow.seed_stride_px", "must be ≥ 1"));
-        }
-        if self.seed_radius_px > 16 {
-            return Err(ParamError::new(
-                "regiongrow.seed_radius_px",
-                format!("must be ≤ 16, got {}", self.seed_radius_px),
-            ));
-        }
-        if self.refit_every_px == 0 {
-            return Err(ParamError::new("regiongrow.refit_every_px", "must be ≥ 1"));
-        }
         if !matches!(self.connectivity, 4 | 8) {
             return Err(ParamError::new(
                 "regiongrow.connectivity",
                 format!("must be 4 or 8, got {}", self.connectivity),
             ));
         }
+        ParamError::in_range("regiongrow.seed_radius_px", self.seed_radius_px, 0, 16)?;
         Ok(())
     }
 }

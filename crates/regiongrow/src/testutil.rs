@@ -1,7 +1,7 @@
-//! Test and bench helpers: synthetic piecewise-planar range images and finite-difference features.
+//! Test and bench helpers: synthetic piecewise-planar range images with their features, from the real
+//! `features` stage (a dev-dependency: the one stage the tidy rule lets another stage's tests use).
 //!
-//! This file is also compiled into `benches/regiongrow.rs` through `#[path]`, so it uses only
-//! `rangeimage` (the `features` stage is not a dependency of this crate).
+//! This file is also compiled into `benches/regiongrow.rs` through `#[path]`.
 #![allow(dead_code)]
 
 use rangeimage::{Grid, RangeImage, SurfaceFeatures};
@@ -14,67 +14,9 @@ pub(crate) struct Scene {
     pub(crate) features: SurfaceFeatures,
 }
 
-/// Finite-difference features over 3×3 windows (all 9 pixels must be finite, else NaN):
-/// plane slopes by least squares, second derivatives by central differences, K, H, curvedness
-/// (from the principal curvatures), and the std of K over the 3×3 window of finite K values.
+/// The features of `range` from the `features` stage, with 3×3 windows (the smallest; the scenes are small).
 pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
-    let (w, h) = range.dimensions();
-    let nan3 = [f32::NAN; 3];
-    let (cx, cy) = ((w as f32 - 1.0) / 2.0, (h as f32 - 1.0) / 2.0);
-    let z = |x: i64, y: i64| range.get_signed(x, y).copied().unwrap_or(f32::NAN);
-    let window = |x: u32, y: u32| -> Option<[[f32; 3]; 3]> {
-        let mut m = [[0.0; 3]; 3];
-        for dy in 0..3 {
-            for dx in 0..3 {
-                let v = z(i64::from(x) + dx - 1, i64::from(y) + dy - 1);
-                if !v.is_finite() {
-                    return None;
-                }
-                m[dy as usize][dx as usize] = v;
-            }
-        }
-        Some(m)
-    };
-    let mut plane = Grid::new(w, h, nan3);
-    let mut k = Grid::new(w, h, f32::NAN);
-    let mut hm = Grid::new(w, h, f32::NAN);
-    let mut curvedness = Grid::new(w, h, f32::NAN);
-    for y in 0..h {
-        for x in 0..w {
-            let Some(m) = window(x, y) else { continue };
-            let a = (0..3).map(|r| m[r][2] - m[r][0]).sum::<f32>() / 6.0;
-            let b = (0..3).map(|c| m[2][c] - m[0][c]).sum::<f32>() / 6.0;
-            let c = m[1][1] - a * (x as f32 - cx) - b * (y as f32 - cy);
-            let ixx = m[1][2] - 2.0 * m[1][1] + m[1][0];
-            let iyy = m[2][1] - 2.0 * m[1][1] + m[0][1];
-            let ixy = (m[2][2] - m[0][2] - m[2][0] + m[0][0]) / 4.0;
-            let g = 1.0 + a * a + b * b;
-            let kk = (ixx * iyy - ixy * ixy) / (g * g);
-            let hh = ((1.0 + b * b) * ixx - 2.0 * a * b * ixy + (1.0 + a * a) * iyy) / (2.0 * g.powf(1.5));
-            let disc = (hh * hh - kk).max(0.0).sqrt();
-            let (k1, k2) = (hh + disc, hh - disc);
-            plane[(x, y)] = [a, b, c];
-            k[(x, y)] = kk;
-            hm[(x, y)] = hh;
-            curvedness[(x, y)] = ((k1 * k1 + k2 * k2) / 2.0).sqrt();
-        }
-    }
-    let k_std = Grid::from_fn(w, h, |x, y| {
-        let (mut n, mut s, mut ss) = (0.0f64, 0.0f64, 0.0f64);
-        for dy in -1..=1i64 {
-            for dx in -1..=1i64 {
-                if let Some(&v) = k.get_signed(i64::from(x) + dx, i64::from(y) + dy)
-                    && v.is_finite()
-                {
-                    n += 1.0;
-                    s += f64::from(v);
-                    ss += f64::from(v) * f64::from(v);
-                }
-            }
-        }
-        if n == 0.0 { f32::NAN } else { ((ss / n - (s / n).powi(2)).max(0.0)).sqrt() as f32 }
-    });
-    SurfaceFeatures { plane, k, h: hm, curvedness, k_std }
+    features::compute(range, &features::Params { window_px: 3, deriv_window_px: 3, k_std_window_px: 3 })
 }
 
 /// Which face of [`box_scene`] a pixel belongs to: 1 = face A, 2 = face B (crease with A at

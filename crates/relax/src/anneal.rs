@@ -119,6 +119,77 @@ fn metropolis(u: f64, x: f64) -> bool {
     if x > 37.0 { u == 0.0 && (-x).exp() > 0.0 } else { u < (-x).exp() }
 }
 
+/// The offsets within the cap (`r = ⌊cap⌋`, `cap2 = ⌊cap²⌋`) on a padded grid of width `pw`, sorted by
+/// squared distance, and the index of the first one at each squared distance: [`State`]'s `disk` and `start`.
+fn disk_tables(r: i32, cap2: u32, pw: usize) -> (Vec<(isize, u16)>, Vec<u32>) {
+    let mut disk = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let d2 = dx * dx + dy * dy;
+            if d2 <= cap2 as i32 {
+                disk.push((d2, dy, dx));
+            }
+        }
+    }
+    disk.sort_unstable();
+    let disk: Vec<(isize, u16)> =
+        disk.iter().map(|&(d2, dy, dx)| (dy as isize * pw as isize + dx as isize, d2 as u16)).collect();
+    let start = (0..=cap2 + 1)
+        .map(|d| disk.iter().position(|e| u32::from(e.1) >= d).unwrap_or(disk.len()) as u32)
+        .collect();
+    (disk, start)
+}
+
+/// Per move direction (the 8 neighbours in raster order): [`State`]'s `nbr`, `lower` and `win`.
+fn move_tables(
+    r: i32,
+    cap2: u32,
+    pw: usize,
+    win_size: (usize, usize),
+) -> ([isize; 8], [Vec<u16>; 8], [Window; 8]) {
+    let cap2 = cap2 as i32;
+    let mut nbr = [0; 8];
+    let mut lower: [Vec<u16>; 8] = Default::default();
+    let mut win: [Window; 8] = Default::default();
+    let mut k = 0;
+    for my in -1i32..=1 {
+        for mx in -1i32..=1 {
+            if mx == 0 && my == 0 {
+                continue;
+            }
+            nbr[k] = my as isize * pw as isize + mx as isize;
+            let step = f64::from(mx * mx + my * my).sqrt();
+            lower[k] = (0..=cap2 + 1)
+                .map(|d2| {
+                    let d = f64::from(d2).sqrt() - step;
+                    if d <= 0.0 { 0 } else { (d * d - 1e-9).ceil().max(0.0) as u16 }
+                })
+                .collect();
+            win[k] = Window::new((mx, my), r, cap2, pw, win_size);
+            k += 1;
+        }
+    }
+    (nbr, lower, win)
+}
+
+impl Window {
+    /// The window of the move by `(mx, my)`, for `r = ⌊cap⌋` and `cap2 = ⌊cap²⌋` on a padded grid of width `pw`.
+    fn new((mx, my): (i32, i32), r: i32, cap2: i32, pw: usize, (win_w, win_h): (usize, usize)) -> Self {
+        let (x0, y0) = (-r + mx.min(0), -r + my.min(0));
+        let mut win = Window { origin: y0 as isize * pw as isize + x0 as isize, ..Window::default() };
+        for wy in 0..win_h as i32 {
+            for wx in 0..win_w as i32 {
+                let (dx, dy) = (x0 + wx, y0 + wy);
+                let da2 = dx * dx + dy * dy;
+                let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
+                win.da.push(if da2 <= cap2 { da2 as u16 } else { FAR_A });
+                win.db.push(if db2 <= cap2 { db2 as u16 } else { FAR16 });
+            }
+        }
+        win
+    }
+}
+
 /// The per-cell arrays of a [`State`], kept between frames (see [`crate::Scratch`]).
 #[derive(Default)]
 pub(crate) struct Buffers {
@@ -215,7 +286,6 @@ impl State {
         lambda: f64,
         bufs: Buffers,
     ) -> Self {
-        let [s1, mag] = strengths;
         let Buffers { mut flags, mut c1d2, vals: [mut v0, mut v1], mut pos, occ2 } = bufs;
         let (w, h) = (c1.width() as usize, c1.height() as usize);
         let r = term.cap.floor() as usize;
@@ -239,6 +309,8 @@ impl State {
         // frame with more edge points reuses the memory (reserved memory is touched only as far as used).
         pos.clear();
         pos.reserve(2 * w * h);
+        let (disk, start) = disk_tables(r as i32, term.cap2, pw);
+        let (nbr, lower, win) = move_tables(r as i32, term.cap2, pw, (win_w, win_h));
         let mut st = Self {
             w,
             h,
@@ -250,11 +322,11 @@ impl State {
             pos,
             occ2,
             n1: 0,
-            disk: Vec::new(),
-            start: Vec::new(),
-            nbr: [0; 8],
-            lower: Default::default(),
-            win: Default::default(),
+            disk,
+            start,
+            nbr,
+            lower,
+            win,
             win_w,
             win_h,
             term,
@@ -265,52 +337,15 @@ impl State {
             scratch: Vec::new(),
             pending: 0,
         };
-        let ri = r as i32;
-        let cap2 = st.term.cap2 as i32;
-        let mut disk = Vec::new();
-        for dy in -ri..=ri {
-            for dx in -ri..=ri {
-                let d2 = dx * dx + dy * dy;
-                if d2 <= cap2 {
-                    disk.push((d2, dy, dx));
-                }
-            }
-        }
-        disk.sort_unstable();
-        st.disk =
-            disk.iter().map(|&(d2, dy, dx)| (dy as isize * pw as isize + dx as isize, d2 as u16)).collect();
-        st.start = (0..=st.term.cap2 + 1)
-            .map(|d| st.disk.iter().position(|e| u32::from(e.1) >= d).unwrap_or(st.disk.len()) as u32)
-            .collect();
-        let mut k = 0;
-        for my in -1i32..=1 {
-            for mx in -1i32..=1 {
-                if mx == 0 && my == 0 {
-                    continue;
-                }
-                st.nbr[k] = my as isize * pw as isize + mx as isize;
-                let step = f64::from(mx * mx + my * my).sqrt();
-                st.lower[k] = (0..=cap2 + 1)
-                    .map(|d2| {
-                        let d = f64::from(d2).sqrt() - step;
-                        if d <= 0.0 { 0 } else { (d * d - 1e-9).ceil().max(0.0) as u16 }
-                    })
-                    .collect();
-                let (x0, y0) = (-ri + mx.min(0), -ri + my.min(0));
-                let mut win = Window { origin: y0 as isize * pw as isize + x0 as isize, ..Window::default() };
-                for wy in 0..win_h as i32 {
-                    for wx in 0..win_w as i32 {
-                        let (dx, dy) = (x0 + wx, y0 + wy);
-                        let da2 = dx * dx + dy * dy;
-                        let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
-                        win.da.push(if da2 <= cap2 { da2 as u16 } else { FAR_A });
-                        win.db.push(if db2 <= cap2 { db2 as u16 } else { FAR16 });
-                    }
-                }
-                st.win[k] = win;
-                k += 1;
-            }
-        }
+        st.load_strengths(valid, strengths, divisor);
+        st.load_points(c1, c2);
+        st.init_energies();
+        st
+    }
+
+    /// Fills the flags with the valid cells and `vals` with the strengths (see [`State::scaled`]).
+    fn load_strengths(&mut self, valid: &Grid<bool>, [s1, mag]: [&Grid<f32>; 2], divisor: [f64; 2]) {
+        let w = self.w;
         for (y, ((vrow, srow), mrow)) in valid
             .as_slice()
             .chunks_exact(w.max(1))
@@ -318,44 +353,52 @@ impl State {
             .zip(mag.as_slice().chunks_exact(w.max(1)))
             .enumerate()
         {
-            let p0 = st.padded(0, y);
-            for (f, &v) in st.flags[p0..p0 + w].iter_mut().zip(vrow) {
+            let p0 = self.padded(0, y);
+            for (f, &v) in self.flags[p0..p0 + w].iter_mut().zip(vrow) {
                 *f = if v { VALID } else { 0 };
             }
             for (k, src) in [srow, mrow].into_iter().enumerate() {
                 let div = divisor[k];
-                for (d, &v) in st.vals[k][p0..p0 + w].iter_mut().zip(src) {
+                for (d, &v) in self.vals[k][p0..p0 + w].iter_mut().zip(src) {
                     *d = (f64::from(if v.is_finite() { v } else { 0.0 }) / div) as f32;
                 }
             }
         }
+    }
+
+    /// The point list: C1 in raster order, then C2 in raster order (marked `OCC2` in the flags).
+    fn load_points(&mut self, c1: &EdgeMap, c2: &EdgeMap) {
+        let w = self.w;
         for (y, row) in c1.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = st.padded(0, y);
-            crate::for_each_set(row, |x| st.pos.push((p0 + x) as u32));
+            let p0 = self.padded(0, y);
+            crate::for_each_set(row, |x| self.pos.push((p0 + x) as u32));
         }
-        st.n1 = st.pos.len();
+        self.n1 = self.pos.len();
         for (y, row) in c2.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = st.padded(0, y);
+            let p0 = self.padded(0, y);
             crate::for_each_set(row, |x| {
-                st.flags[p0 + x] |= OCC2;
-                st.pos.push((p0 + x) as u32);
+                self.flags[p0 + x] |= OCC2;
+                self.pos.push((p0 + x) as u32);
             });
         }
+    }
+
+    /// The cached distances of the C1 points, the internal energy and A + B from the loaded points.
+    fn init_energies(&mut self) {
         let mut e_int = 0.0;
-        for k in 0..st.n1 {
-            let p = st.pos[k] as usize;
-            let d = st.nearest(p);
-            st.c1d2[p] = d;
-            e_int += st.term.value16(d);
+        for k in 0..self.n1 {
+            let p = self.pos[k] as usize;
+            let d = self.nearest(p);
+            self.c1d2[p] = d;
+            e_int += self.term.value16(d);
         }
-        st.e_int = e_int;
+        self.e_int = e_int;
         let mut ab = 0.0;
-        for (k, &p) in st.pos.iter().enumerate() {
-            ab += f64::from(st.vals[usize::from(k >= st.n1)][p as usize]);
+        for (k, &p) in self.pos.iter().enumerate() {
+            ab += f64::from(self.vals[usize::from(k >= self.n1)][p as usize]);
         }
-        st.ab = ab;
-        st.ext_sum = ab;
-        st
+        self.ab = ab;
+        self.ext_sum = ab;
     }
 
     #[inline]

@@ -96,17 +96,8 @@ pub(crate) struct Gradient {
 }
 
 /// `out[x] = Σ_k g[k] · rows[k][x]`, accumulated from 0 in tap order (one pass for the common 3 and 5 taps).
+#[inline(always)] // into `gradient`, compiled for each instruction set
 fn weighted_sum(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
-    // Called from a closure of `gradient` that is not inlined: dispatched on its own.
-    isa::dispatch(
-        #[inline(always)]
-        || weighted_sum_kernel(rows, g, out),
-    );
-}
-
-/// [`weighted_sum`]'s body, compiled for each instruction set ([`isa::dispatch`]).
-#[inline(always)]
-fn weighted_sum_kernel(rows: &[&[f32]], g: &[f32], out: &mut [f32]) {
     let w = out.len();
     match (rows, g) {
         ([r0, r1, r2, r3, r4], &[g0, g1, g2, g3, g4]) => {
@@ -148,6 +139,9 @@ fn horizontal(pad: &[f32], g: &[f32], dst: &mut [f32]) {
 /// derivatives, combines them with the Di Zenzo tensor into magnitude and direction, and suppresses
 /// non-maxima. Channels of weight 0 are skipped. The magnitudes of the ok pixels are counted into `hist`.
 /// The result reuses the memory of `bufs`.
+///
+/// Step `t` of the pipeline smooths row `t` (horizontally first every row up to `t + r` it needs), then takes
+/// the tensor of row `t − 1` and suppresses the non-maxima of row `t − 2`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)] // into `isa::dispatch` in `run`: compiled for each instruction set
 pub(crate) fn gradient(
@@ -162,163 +156,281 @@ pub(crate) fn gradient(
 ) -> Gradient {
     let n = w * h;
     let Gradient { mut ok, mut magnitude, mut candidates } = bufs;
-    ok.clear();
+    // Every row of the three is written below, so stale values of a reused buffer need no clearing.
     ok.resize(n, false);
-    magnitude.clear();
     magnitude.resize(n, 0.0);
-    candidates.clear();
     candidates.resize(n, 0);
     if n == 0 {
         return Gradient { ok, magnitude, candidates };
     }
-    let r = g.len() / 2;
-    let ring = g.len();
-    let active: Vec<(usize, f32)> =
-        weights.iter().copied().enumerate().filter(|&(_, wt)| wt != 0.0).collect();
-    let na = active.len();
-
-    // Horizontal ring: slot 0 = the mask, 1.. = the active channels; `ring` rows each.
-    let mut hbuf = vec![0.0f32; (1 + na) * ring * w];
-    // Padded input rows (zeros on both sides): the mask, then every channel.
-    let pw = w + 2 * r;
-    let mut pad = vec![0.0f32; pw];
-    let mut pads = vec![0.0f32; input.len() * pw];
-    // Smoothed channels, 3 rows each (rows t − 2, t − 1, t).
-    let mut sbuf = vec![0.0f32; na * 3 * w];
-    let mut inv = vec![0.0f32; w];
-    let mut vrow = vec![0.0f32; w];
-    let none = vec![false; w];
-    let (mut col, mut full, mut runs) = (Vec::with_capacity(w), Vec::with_capacity(w), Vec::new());
-    // Tensor of one row.
-    let (mut jxx, mut jxy, mut jyy) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
-    // Magnitudes padded with a zero column on each side, 3 rows; a zero row for outside the image.
-    let mut mbuf = vec![0.0f32; 3 * (w + 2)];
-    let zero = vec![0.0f32; w + 2];
-    // Directions, 2 rows.
-    let (mut dxs, mut dys) = (vec![0.0f32; 2 * w], vec![0.0f32; 2 * w]);
-
     let rows = |y: usize| y * w..(y + 1) * w;
-    // The smoothed mask of a row without no-data, the normaliser of a band of such rows, and the last row
-    // loaded that has no-data.
-    let (mut full_h, mut full_inv): (Option<Vec<f32>>, Option<Vec<f32>>) = (None, None);
-    let mut last_partial: Option<usize> = None;
-    let mut next_h = 0;
+    let mut smooth = Smoother::new(input, weights, valid, w, h, g);
+    let mut tensor = Tensor::new(w);
     for t in 0..h + 2 {
         if t < h {
-            // Horizontal smoothing of every row the vertical pass of row t needs.
-            while next_h < h && next_h <= t + r {
-                let y = next_h;
-                let slot = y % ring;
-                input.load_row(y, valid, &mut ok[rows(y)], &mut pads, r);
-                let mask_h = &mut hbuf[slot * w..(slot + 1) * w];
-                if ok[rows(y)].iter().fold(true, |a, &o| a & o) {
-                    // Every row without no-data smooths its mask to the same row: computed once.
-                    match &full_h {
-                        Some(fh) => mask_h.copy_from_slice(fh),
-                        None => {
-                            pad[r..r + w].fill(1.0);
-                            horizontal(&pad, g, mask_h);
-                            full_h = Some(mask_h.to_vec());
-                        }
-                    }
-                } else {
-                    last_partial = Some(y);
-                    for (p, &o) in pad[r..r + w].iter_mut().zip(&ok[rows(y)]) {
-                        *p = if o { 1.0 } else { 0.0 };
-                    }
-                    horizontal(&pad, g, mask_h);
-                }
-                for (a, &(c, _)) in active.iter().enumerate() {
-                    let base = ((1 + a) * ring + slot) * w;
-                    horizontal(&pads[c * pw..(c + 1) * pw], g, &mut hbuf[base..base + w]);
-                }
-                next_h += 1;
-            }
-            // Vertical smoothing of row t: the mask gives the normaliser, then each channel.
-            // Rows outside the image contribute nothing (zero padding): their taps are skipped.
-            let k0 = r.saturating_sub(t);
-            let k1 = g.len().min(h + r - t);
-            let vertical = |plane: usize, out: &mut [f32]| {
-                let mut rows = [&hbuf[..0]; crate::MAX_KERNEL_PX];
-                for k in k0..k1 {
-                    let base = (plane * ring + (t + k - r) % ring) * w;
-                    rows[k - k0] = &hbuf[base..base + w];
-                }
-                weighted_sum(&rows[..k1 - k0], &g[k0..k1], out);
-            };
-            // Away from the top and bottom, a band of rows without no-data has the same normaliser every time.
-            let full_band = t >= r && t + r < h && last_partial.is_none_or(|b| b + r < t);
-            match (&full_inv, full_band) {
-                (Some(fi), true) => inv.copy_from_slice(fi),
-                _ => {
-                    vertical(0, &mut vrow);
-                    for ((iv, &s), &o) in inv.iter_mut().zip(&vrow).zip(&ok[rows(t)]) {
-                        *iv = if o && s > 0.0 { 1.0 / s } else { 0.0 };
-                    }
-                    if full_band {
-                        full_inv = Some(inv.clone());
-                    }
-                }
-            }
-            for a in 0..na {
-                let base = (a * 3 + t % 3) * w;
-                let out = &mut sbuf[base..base + w];
-                vertical(1 + a, out);
-                for (s, &iv) in out.iter_mut().zip(&inv) {
-                    *s *= iv;
-                }
-            }
+            smooth.horizontal_to(t, &mut ok);
+            smooth.vertical(t, &ok[rows(t)]);
         }
         if (1..=h).contains(&t) {
-            // Sobel, tensor and eigenvector of row y.
             let y = t - 1;
-            jxx.fill(0.0);
-            jxy.fill(0.0);
-            jyy.fill(0.0);
-            for (a, &(_, wt)) in active.iter().enumerate() {
-                let row = |yy: usize| &sbuf[(a * 3 + yy % 3) * w..(a * 3 + yy % 3 + 1) * w];
-                let (sc, oc) = (row(y), &ok[rows(y)]);
-                // Outside the image: any row with no valid pixel (every neighbour there takes the centre value).
-                let (su, ou) = if y > 0 { (row(y - 1), &ok[rows(y - 1)]) } else { (sc, &none[..]) };
-                let (sd, od) = if y + 1 < h { (row(y + 1), &ok[rows(y + 1)]) } else { (sc, &none[..]) };
-                let rows = SobelRows { su, sc, sd, ou, oc, od };
-                if a == 0 {
-                    interior_runs(&rows, &mut col, &mut full, &mut runs);
-                }
-                sobel_row(&rows, &runs, wt, &mut jxx, &mut jxy, &mut jyy);
-            }
-            let slot = y % 3;
-            let (mrow, drow) = (&mut mbuf[slot * (w + 2)..(slot + 1) * (w + 2)], (y % 2) * w);
-            eigen_row(
-                &jxx,
-                &jxy,
-                &jyy,
-                &ok[rows(y)],
-                &mut mrow[1..w + 1],
-                &mut dxs[drow..drow + w],
-                &mut dys[drow..drow + w],
-            );
-            magnitude[y * w..(y + 1) * w].copy_from_slice(&mrow[1..w + 1]);
+            let mrow = tensor.row(&smooth, y, &ok);
+            magnitude[rows(y)].copy_from_slice(mrow);
             if let Some(hs) = hist.as_deref_mut() {
-                hs.add_row(&mrow[1..w + 1], &ok[rows(y)]);
+                hs.add_row(mrow, &ok[rows(y)]);
             }
         }
         if t >= 2 {
-            // Non-maximum suppression of row y.
-            let y = t - 2;
-            let mrow = |yy: usize| &mbuf[(yy % 3) * (w + 2)..(yy % 3 + 1) * (w + 2)];
-            let up = if y > 0 { mrow(y - 1) } else { &zero[..] };
-            let down = if y + 1 < h { mrow(y + 1) } else { &zero[..] };
-            let drow = (y % 2) * w;
-            nms_row(
-                [up, mrow(y), down],
-                &dxs[drow..drow + w],
-                &dys[drow..drow + w],
-                &mut candidates[y * w..(y + 1) * w],
-            );
+            tensor.suppress(t - 2, h, &mut candidates[rows(t - 2)]);
         }
     }
     Gradient { ok, magnitude, candidates }
+}
+
+/// The smoothing stages of [`gradient`]: the horizontal pass into a ring of `g.len()` rows, the vertical pass
+/// and normalisation into a ring of the 3 rows Sobel needs.
+struct Smoother<'a> {
+    input: &'a Input<'a>,
+    valid: Option<&'a [bool]>,
+    w: usize,
+    h: usize,
+    g: &'a [f32],
+    /// `(channel, weight)` of the channels of weight ≠ 0.
+    active: Vec<(usize, f32)>,
+    /// Horizontal ring: slot 0 = the mask, 1.. = the active channels; `g.len()` rows each.
+    hbuf: Vec<f32>,
+    /// The padded mask row (zeros on both sides) and the padded rows of every channel.
+    pad: Vec<f32>,
+    pads: Vec<f32>,
+    /// Smoothed active channels, 3 rows each (row `y` in slot `y % 3`).
+    sbuf: Vec<f32>,
+    /// The normaliser of the current row and the vertically smoothed mask it comes from.
+    inv: Vec<f32>,
+    vrow: Vec<f32>,
+    /// The smoothed mask of a row without no-data (all such rows have the same).
+    full_h: Option<Vec<f32>>,
+    /// The normaliser of a row in a band of rows without no-data, away from the top and bottom.
+    full_inv: Option<Vec<f32>>,
+    /// The last row loaded that has no-data.
+    last_partial: Option<usize>,
+    /// The next row to smooth horizontally.
+    next_h: usize,
+}
+
+impl<'a> Smoother<'a> {
+    /// Empty rings for an image of `w × h` pixels.
+    #[inline(always)]
+    fn new(
+        input: &'a Input<'a>,
+        weights: &[f32],
+        valid: Option<&'a [bool]>,
+        w: usize,
+        h: usize,
+        g: &'a [f32],
+    ) -> Self {
+        let active: Vec<(usize, f32)> =
+            weights.iter().copied().enumerate().filter(|&(_, wt)| wt != 0.0).collect();
+        let (na, pw) = (active.len(), w + g.len() - 1);
+        Self {
+            input,
+            valid,
+            w,
+            h,
+            g,
+            hbuf: vec![0.0; (1 + na) * g.len() * w],
+            pad: vec![0.0; pw],
+            pads: vec![0.0; input.len() * pw],
+            sbuf: vec![0.0; na * 3 * w],
+            inv: vec![0.0; w],
+            vrow: vec![0.0; w],
+            active,
+            full_h: None,
+            full_inv: None,
+            last_partial: None,
+            next_h: 0,
+        }
+    }
+
+    /// Loads and smooths horizontally every row up to `t + r` not done yet (the rows the vertical pass of row
+    /// `t` needs), setting their `ok` flags.
+    #[inline(always)]
+    fn horizontal_to(&mut self, t: usize, ok: &mut [bool]) {
+        let (w, g) = (self.w, self.g);
+        let (r, ring) = (g.len() / 2, g.len());
+        let pw = w + 2 * r;
+        while self.next_h < self.h && self.next_h <= t + r {
+            let y = self.next_h;
+            let slot = y % ring;
+            let ok = &mut ok[y * w..(y + 1) * w];
+            self.input.load_row(y, self.valid, ok, &mut self.pads, r);
+            let mask_h = &mut self.hbuf[slot * w..(slot + 1) * w];
+            if ok.iter().fold(true, |a, &o| a & o) {
+                // Every row without no-data smooths its mask to the same row: computed once.
+                match &self.full_h {
+                    Some(fh) => mask_h.copy_from_slice(fh),
+                    None => {
+                        self.pad[r..r + w].fill(1.0);
+                        horizontal(&self.pad, g, mask_h);
+                        self.full_h = Some(mask_h.to_vec());
+                    }
+                }
+            } else {
+                self.last_partial = Some(y);
+                for (p, &o) in self.pad[r..r + w].iter_mut().zip(&*ok) {
+                    *p = if o { 1.0 } else { 0.0 };
+                }
+                horizontal(&self.pad, g, mask_h);
+            }
+            for (a, &(c, _)) in self.active.iter().enumerate() {
+                let base = ((1 + a) * ring + slot) * w;
+                horizontal(&self.pads[c * pw..(c + 1) * pw], g, &mut self.hbuf[base..base + w]);
+            }
+            self.next_h += 1;
+        }
+    }
+
+    /// Smooths row `t` vertically: the mask gives the normaliser (0 where not `ok`), then each active channel,
+    /// normalised, into its slot of the 3-row ring.
+    #[inline(always)]
+    fn vertical(&mut self, t: usize, ok: &[bool]) {
+        let (w, h, r) = (self.w, self.h, self.g.len() / 2);
+        // Away from the top and bottom, a band of rows without no-data has the same normaliser every time.
+        let full_band = t >= r && t + r < h && self.last_partial.is_none_or(|b| b + r < t);
+        match (&self.full_inv, full_band) {
+            (Some(fi), true) => self.inv.copy_from_slice(fi),
+            _ => {
+                self.vertical_sum(0, t, Out::Mask);
+                for ((iv, &s), &o) in self.inv.iter_mut().zip(&self.vrow).zip(ok) {
+                    *iv = if o && s > 0.0 { 1.0 / s } else { 0.0 };
+                }
+                if full_band {
+                    self.full_inv = Some(self.inv.clone());
+                }
+            }
+        }
+        for a in 0..self.active.len() {
+            self.vertical_sum(1 + a, t, Out::Channel(a));
+            let base = (a * 3 + t % 3) * w;
+            for (s, &iv) in self.sbuf[base..base + w].iter_mut().zip(&self.inv) {
+                *s *= iv;
+            }
+        }
+    }
+
+    /// The vertical Gaussian of ring `plane` (0 = the mask) at row `t` into `out`. Rows outside the image
+    /// contribute nothing (zero padding): their taps are skipped.
+    #[inline(always)]
+    fn vertical_sum(&mut self, plane: usize, t: usize, out: Out) {
+        let (w, h, g) = (self.w, self.h, self.g);
+        let (r, ring) = (g.len() / 2, g.len());
+        let (k0, k1) = (r.saturating_sub(t), g.len().min(h + r - t));
+        let mut rows = [&self.hbuf[..0]; crate::MAX_KERNEL_PX];
+        for k in k0..k1 {
+            let base = (plane * ring + (t + k - r) % ring) * w;
+            rows[k - k0] = &self.hbuf[base..base + w];
+        }
+        let out = match out {
+            Out::Mask => &mut self.vrow[..],
+            Out::Channel(a) => &mut self.sbuf[(a * 3 + t % 3) * w..(a * 3 + t % 3 + 1) * w],
+        };
+        weighted_sum(&rows[..k1 - k0], &g[k0..k1], out);
+    }
+
+    /// Row `y` of active channel `a`, smoothed (one of the last 3 rows done).
+    #[inline(always)]
+    fn smoothed(&self, a: usize, y: usize) -> &[f32] {
+        let base = (a * 3 + y % 3) * self.w;
+        &self.sbuf[base..base + self.w]
+    }
+}
+
+/// Where [`Smoother::vertical_sum`] writes: the smoothed mask row or active channel `a`'s row.
+#[derive(Clone, Copy)]
+enum Out {
+    Mask,
+    Channel(usize),
+}
+
+/// The tensor stage of [`gradient`]: Sobel, the Di Zenzo tensor and its eigenvector of one row, and the
+/// rings of magnitudes (3 rows) and directions (2 rows) that non-maximum suppression reads.
+struct Tensor {
+    w: usize,
+    /// A row of `ok` flags all false (the row outside the image).
+    none: Vec<bool>,
+    /// Scratch of [`interior_runs`] and the runs of the current row.
+    col: Vec<u8>,
+    full: Vec<u8>,
+    runs: Vec<(usize, usize, bool)>,
+    /// The tensor of one row.
+    jxx: Vec<f32>,
+    jxy: Vec<f32>,
+    jyy: Vec<f32>,
+    /// Magnitudes padded with a zero column on each side, 3 rows; a zero row for outside the image.
+    mbuf: Vec<f32>,
+    zero: Vec<f32>,
+    /// Directions, 2 rows.
+    dxs: Vec<f32>,
+    dys: Vec<f32>,
+}
+
+impl Tensor {
+    /// Empty rings for rows of `w` pixels.
+    #[inline(always)]
+    fn new(w: usize) -> Self {
+        Self {
+            w,
+            none: vec![false; w],
+            col: Vec::with_capacity(w),
+            full: Vec::with_capacity(w),
+            runs: Vec::new(),
+            jxx: vec![0.0; w],
+            jxy: vec![0.0; w],
+            jyy: vec![0.0; w],
+            mbuf: vec![0.0; 3 * (w + 2)],
+            zero: vec![0.0; w + 2],
+            dxs: vec![0.0; 2 * w],
+            dys: vec![0.0; 2 * w],
+        }
+    }
+
+    /// Sobel, tensor and eigenvector of row `y` from the smoothed rows `y − 1 ..= y + 1` of `s`; returns the
+    /// row's magnitudes. `ok` holds the flags of the whole image.
+    #[inline(always)]
+    fn row(&mut self, s: &Smoother<'_>, y: usize, ok: &[bool]) -> &[f32] {
+        let (w, h) = (self.w, s.h);
+        let rows = |y: usize| y * w..(y + 1) * w;
+        self.jxx.fill(0.0);
+        self.jxy.fill(0.0);
+        self.jyy.fill(0.0);
+        for (a, &(_, wt)) in s.active.iter().enumerate() {
+            let (sc, oc) = (s.smoothed(a, y), &ok[rows(y)]);
+            // Outside the image: any row with no valid pixel (every neighbour there takes the centre value).
+            let (su, ou) =
+                if y > 0 { (s.smoothed(a, y - 1), &ok[rows(y - 1)]) } else { (sc, &self.none[..]) };
+            let (sd, od) =
+                if y + 1 < h { (s.smoothed(a, y + 1), &ok[rows(y + 1)]) } else { (sc, &self.none[..]) };
+            let rows = SobelRows { su, sc, sd, ou, oc, od };
+            if a == 0 {
+                interior_runs(&rows, &mut self.col, &mut self.full, &mut self.runs);
+            }
+            sobel_row(&rows, &self.runs, wt, &mut self.jxx, &mut self.jxy, &mut self.jyy);
+        }
+        let (m, d) = ((y % 3) * (w + 2), (y % 2) * w);
+        let mrow = &mut self.mbuf[m + 1..m + w + 1];
+        let (dxs, dys) = (&mut self.dxs[d..d + w], &mut self.dys[d..d + w]);
+        eigen_row(&self.jxx, &self.jxy, &self.jyy, &ok[rows(y)], mrow, dxs, dys);
+        mrow
+    }
+
+    /// Non-maximum suppression of row `y` (of `h`) into `keep`; rows `y − 1 ..= y + 1` are done.
+    #[inline(always)]
+    fn suppress(&self, y: usize, h: usize, keep: &mut [u8]) {
+        let w = self.w;
+        let mrow = |yy: usize| &self.mbuf[(yy % 3) * (w + 2)..(yy % 3 + 1) * (w + 2)];
+        let up = if y > 0 { mrow(y - 1) } else { &self.zero[..] };
+        let down = if y + 1 < h { mrow(y + 1) } else { &self.zero[..] };
+        let d = (y % 2) * w;
+        nms_row([up, mrow(y), down], &self.dxs[d..d + w], &self.dys[d..d + w], keep);
+    }
 }
 
 /// The smoothed values and `ok` flags of three consecutive rows (up, centre, down), all of the row's length.

@@ -245,15 +245,19 @@ fn run(
     bufs.magnitude = std::mem::take(&mut out.magnitude).into_vec();
     let valid = valid.map(|v| v.as_slice());
     let mut hist = hist;
-    // The per-pixel passes, compiled for the best instruction set of this CPU (bit-identical on every one).
-    let mut grad = isa::dispatch(
-        #[inline(always)]
-        || gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs),
-    );
-    let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist);
     let mut edges = std::mem::take(&mut out.edges).into_vec();
-    let bufs = (&mut edges, &mut scratch.stack);
-    canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, (low, high), bufs);
+    // The per-pixel passes, thresholds and hysteresis, compiled for the best instruction set of this CPU
+    // (bit-identical on every one).
+    let (mut grad, low, high) = isa::dispatch(
+        #[inline(always)]
+        || {
+            let mut grad = gradient::gradient(input, weights, valid, w, h, &g, hist.as_deref_mut(), bufs);
+            let (low, high) = canny::thresholds(&params.thresholds, &grad.magnitude, &grad.ok, hist);
+            let bufs = (&mut edges, &mut scratch.stack);
+            canny::hysteresis_in_place(&grad.magnitude, &mut grad.candidates, w, h, (low, high), bufs);
+            (grad, low, high)
+        },
+    );
     tracing::debug!(low, high, n_edges = edges.iter().filter(|&&e| e).count(), "vcanny done");
     out.edges = Grid::from_vec(wu, hu, edges).expect("size matches");
     out.magnitude = Grid::from_vec(wu, hu, std::mem::take(&mut grad.magnitude)).expect("size matches");

@@ -439,7 +439,7 @@ mod fast_path {
 
 #[test]
 fn every_instruction_set_gives_the_same_bits() {
-    // The gradient pass runs compiled for each instruction set of this CPU (isa::dispatch): the same bits on each.
+    // The detector runs compiled for each instruction set of this CPU (isa::dispatch): the same bits on each.
     use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(17);
     let (w, h) = (77, 53);
@@ -454,9 +454,13 @@ fn every_instruction_set_gives_the_same_bits() {
     let valid = rangeimage::valid_mask(&range);
     let bits =
         |e: &Edges| (e.edges.clone(), e.magnitude.as_slice().iter().map(|m| m.to_bits()).collect::<Vec<_>>());
+    // Every threshold mode: the quantile selection and hysteresis run in the dispatched code too.
+    let quantile = Thresholds { mode: ThresholdMode::Quantile, low: 0.7, high: 0.9, ..Thresholds::default() };
     for params in [
         Params::default(),
         Params { sigma_px: 2.0, kernel_px: 9, weights: [1.0, 0.5, 0.25], ..Params::default() },
+        Params { thresholds: quantile, ..Params::default() },
+        abs(0.05, 0.2),
     ] {
         let run = || (bits(&detect_planes(&plane, &valid, &params)), bits(&detect_raw(&range, &params)));
         let a = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");

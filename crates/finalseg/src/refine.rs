@@ -1,0 +1,168 @@
+//! Step 5 of the final segmentation: border pixels moved to the adjacent region whose plane fits
+//! them better, so that a border lies where the two planes meet rather than where growth stopped.
+
+use crate::Scene;
+use crate::fill::{Limit, for_neighbours};
+use crate::plane::{Plane, fit_plane};
+use planefit::Moments;
+
+/// The working memory of [`refine`] and [`refit`], kept from one frame to the next.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// The pixels a pass examines, in raster order.
+    cand: Vec<u32>,
+    /// The moves a pass decided: (pixel, new label).
+    moves: Vec<(u32, u32)>,
+    /// Per pixel: already among the next pass's candidates (all false between passes).
+    seen: Vec<bool>,
+    /// [`refit`]: the moments of each label.
+    moments: Vec<Moments>,
+}
+
+/// Moves border pixels of `groups` (a label per pixel, 0 = none; `planes[l − 1]` is the plane of
+/// label `l`) to the 8-adjacent region that fits them better (see `better_label`). At most
+/// `passes` passes: each is decided from the labels of the previous one only (ties keep the pixel
+/// where it is, then go to the smaller label), so the order of pixels does not matter; a border
+/// moves at most one pixel per pass. Returns the number of moves.
+pub(crate) fn refine(
+    scene: &Scene<'_>,
+    groups: &mut [u32],
+    planes: &[Plane],
+    limit: Limit,
+    passes: u32,
+    bufs: &mut Buffers,
+) -> u32 {
+    let (w, h) = (scene.w, scene.h);
+    let Buffers { cand, moves, seen, .. } = bufs;
+    seen.clear();
+    seen.resize(w * h, false);
+    // Candidates of the first pass: every labelled pixel with a differently labelled 8-neighbour.
+    cand.clear();
+    for y in 0..h {
+        for x in 0..w {
+            let l = groups[y * w + x];
+            if l == 0 {
+                continue;
+            }
+            let mut border = false;
+            for_neighbours(x, y, w, h, |j, _, _| border |= groups[j] != 0 && groups[j] != l);
+            if border {
+                cand.push((y * w + x) as u32);
+            }
+        }
+    }
+    let mut total = 0u32;
+    for _ in 0..passes {
+        moves.clear();
+        moves.extend(
+            cand.iter()
+                .filter_map(|&i| better_label(scene, groups, planes, i as usize, limit).map(|l| (i, l))),
+        );
+        if moves.is_empty() {
+            break;
+        }
+        for &(i, l) in moves.iter() {
+            groups[i as usize] = l;
+        }
+        total += moves.len() as u32;
+        // Next candidates: the moved pixels' labelled neighbours (their best plane may have come
+        // next to them), each once, in raster order.
+        cand.clear();
+        for &(i, _) in moves.iter() {
+            let i = i as usize;
+            for_neighbours(i % w, i / w, w, h, |j, _, _| {
+                if groups[j] != 0 && !seen[j] {
+                    seen[j] = true;
+                    cand.push(j as u32);
+                }
+            });
+        }
+        cand.sort_unstable();
+        for &j in cand.iter() {
+            seen[j as usize] = false;
+        }
+    }
+    tracing::debug!(moves = total, "refined borders");
+    total
+}
+
+/// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
+/// moments summed in raster order; a label without pixels keeps its plane.
+pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], planes: &mut [Plane], bufs: &mut Buffers) {
+    let moments = &mut bufs.moments;
+    moments.clear();
+    moments.resize(planes.len(), Moments::default());
+    for (i, &l) in groups.iter().enumerate() {
+        if l != 0
+            && let Some(p) = scene.point(i % scene.w, i / scene.w)
+        {
+            moments[l as usize - 1].add(p);
+        }
+    }
+    for (plane, m) in planes.iter_mut().zip(moments.iter()) {
+        if m.n > 0.0 {
+            *plane = fit_plane(m, scene.camera);
+        }
+    }
+}
+
+/// The label pixel `i` should move to, if an 8-adjacent region fits it better than its own (and
+/// within `limit`). "Fits" is a Potts energy: the squared distance to the region's plane in units
+/// of the noise (the largest RMS of the candidate planes, at least `SIGMA_FLOOR`), plus `BETA` per
+/// 8-neighbour of another label, so that noise near a shallow crease does not fray the border.
+fn better_label(
+    scene: &Scene<'_>,
+    groups: &[u32],
+    planes: &[Plane],
+    i: usize,
+    limit: Limit,
+) -> Option<u32> {
+    let (w, h) = (scene.w, scene.h);
+    let own = groups[i];
+    let p = scene.point(i % w, i / w)?;
+    let plane_of = |l: u32| &planes[l as usize - 1];
+    // The distinct labels around (own first) and how many of the 8 neighbours carry each.
+    let mut labs = [(own, 0u32); 9];
+    let mut n = 1;
+    for_neighbours(i % w, i / w, w, h, |j, _, _| {
+        let l = groups[j];
+        if l == 0 {
+            return;
+        }
+        match labs[..n].iter_mut().find(|e| e.0 == l) {
+            Some(e) => e.1 += 1,
+            None => {
+                labs[n] = (l, 1);
+                n += 1;
+            }
+        }
+    });
+    if n == 1 {
+        return None;
+    }
+    let sigma = labs[..n].iter().map(|e| plane_of(e.0).rms).fold(SIGMA_FLOOR, f64::max);
+    // A pixel its own plane explains within the noise stays.
+    if plane_of(own).residual(p) <= OUTLIER * sigma {
+        return None;
+    }
+    let energy = |(l, k): (u32, u32)| {
+        let r = plane_of(l).residual(p) / sigma;
+        r * r + BETA * f64::from(8 - k)
+    };
+    let mut best = (energy(labs[0]), own);
+    for &e in &labs[1..n] {
+        let en = energy(e);
+        if en < best.0 || (en == best.0 && best.1 != own && e.0 < best.1) {
+            best = (en, e.0);
+        }
+    }
+    let l = best.1;
+    (l != own && !limit.refuses(plane_of(l).residual(p), plane_of(l))).then_some(l)
+}
+
+/// Weight of one disagreeing neighbour in the refinement energy.
+const BETA: f64 = 0.5;
+/// A pixel moves only if it lies farther than this many noise scales from its own plane.
+const OUTLIER: f64 = 2.5;
+/// Smallest noise scale of the refinement energy, in sensor units.
+const SIGMA_FLOOR: f64 = 0.5;
