@@ -17,8 +17,11 @@ pub enum Role {
 /// One data set named on the command line: a folder, and the camera its images need.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DataSpec {
-    /// The folder (`None`: the synthetic benchmark, generated on first use).
+    /// The folder (`None`: the synthetic benchmark or, with `family`, a family set, generated on first use).
     pub dir: Option<PathBuf>,
+    /// With `dir: None`, an artefact family and its strength (`--data synthetic:FAMILY[@STRENGTH]`), generated
+    /// into `target/synthetic/FAMILY-sSTRENGTH/` on every use.
+    pub family: Option<(scenegen::Family, f64)>,
     /// The camera of every image; `None`: by file name (ABW calibration 0 or 1, or [`rangeio::NYU_GREY`] for
     /// `nyu.K`).
     pub camera: Option<Camera>,
@@ -29,20 +32,57 @@ pub struct DataSpec {
 impl DataSpec {
     /// The synthetic ABW-like benchmark.
     pub fn synthetic() -> Self {
-        Self { dir: None, camera: None, inverted_depth: None }
+        Self { dir: None, family: None, camera: None, inverted_depth: None }
     }
 
-    /// The folder this spec reads, generating the synthetic benchmark if needed.
+    /// A folder of labelled images.
+    pub fn folder(dir: impl Into<PathBuf>) -> Self {
+        Self { dir: Some(dir.into()), ..Self::synthetic() }
+    }
+
+    /// Parses the value of `--data`: `synthetic`, `synthetic:FAMILY[@STRENGTH]` or a folder.
+    pub fn parse(v: &str) -> Result<Self> {
+        let Some(rest) = v.strip_prefix("synthetic:") else {
+            return Ok(if v == "synthetic" { Self::synthetic() } else { Self::folder(v) });
+        };
+        let (name, strength) = match rest.split_once('@') {
+            Some((n, s)) => {
+                let strength: f64 =
+                    s.parse().ok().filter(|x: &f64| (0.0..=10.0).contains(x)).with_context(|| {
+                        format!("--data {v}: the strength after @ must be a number in 0..=10")
+                    })?;
+                (n, strength)
+            }
+            None => (rest, 1.0),
+        };
+        let family = scenegen::Family::from_name(name).with_context(|| {
+            let names: Vec<&str> = scenegen::Family::ALL.iter().map(|f| f.name()).collect();
+            format!("--data {v}: unknown family `{name}` (families: {})", names.join(", "))
+        })?;
+        Ok(Self { family: Some((family, strength)), ..Self::synthetic() })
+    }
+
+    /// The folder this spec reads, generating the synthetic benchmark or the family set if needed.
     pub fn resolve_dir(&self, root: &Path) -> Result<PathBuf> {
-        match &self.dir {
-            Some(d) => Ok(d.clone()),
-            None => crate::gen_data::ensure_synthetic_data(root),
+        match (&self.dir, self.family) {
+            (Some(d), _) => Ok(d.clone()),
+            (None, None) => crate::gen_data::ensure_synthetic_data(root),
+            (None, Some((family, strength))) => crate::gen_data::ensure_family_data(root, family, strength),
+        }
+    }
+
+    /// The short name of a synthetic spec (`synthetic`, `synthetic:stripes@1`), `None` for a folder.
+    pub fn synthetic_name(&self) -> Option<String> {
+        match (&self.dir, self.family) {
+            (Some(_), _) => None,
+            (None, None) => Some("synthetic".into()),
+            (None, Some((f, s))) => Some(format!("synthetic:{}@{s}", f.name())),
         }
     }
 }
 
 /// Parses repeated `--data DIR [--camera CAM]` options (a `--camera` applies to the `--data` before it;
-/// `--data synthetic` names the synthetic benchmark). Returns the specs and the arguments left over.
+/// `--data synthetic` names the synthetic benchmark, `--data synthetic:FAMILY[@STRENGTH]` a family set). Returns the specs and the arguments left over.
 pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
     let mut specs: Vec<DataSpec> = Vec::new();
     let mut rest = Vec::new();
@@ -50,12 +90,8 @@ pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
     while let Some(a) = it.next() {
         match a.as_str() {
             "--data" => {
-                let v = it.next().context("--data needs a folder (or `synthetic`)")?;
-                specs.push(if v == "synthetic" {
-                    DataSpec::synthetic()
-                } else {
-                    DataSpec { dir: Some(v.into()), camera: None, inverted_depth: None }
-                });
+                let v = it.next().context("--data needs a folder (or `synthetic`, `synthetic:FAMILY`)")?;
+                specs.push(DataSpec::parse(v)?);
             }
             "--camera" => {
                 let v = it
@@ -158,7 +194,7 @@ pub struct DataSet {
 pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
     let dir = spec.resolve_dir(root)?;
     let name = match &spec.dir {
-        None => "synthetic".to_string(),
+        None => spec.synthetic_name().unwrap_or_default(),
         Some(d) => d
             .canonicalize()
             .ok()
@@ -281,16 +317,29 @@ mod tests {
     fn camera_follows_its_data() {
         let (specs, rest) = parse_specs(&args("--data a --data b --camera grid --out o")).unwrap();
         assert_eq!(specs.len(), 2);
-        assert_eq!(specs[0], DataSpec { dir: Some("a".into()), camera: None, inverted_depth: None });
-        assert_eq!(
-            specs[1],
-            DataSpec { dir: Some("b".into()), camera: Some(Camera::Grid), inverted_depth: None }
-        );
+        assert_eq!(specs[0], DataSpec::folder("a"));
+        assert_eq!(specs[1], DataSpec { camera: Some(Camera::Grid), ..DataSpec::folder("b") });
         let (specs, _) = parse_specs(&args("--data n --camera nyu-grey")).unwrap();
         let nyu = rangeio::NYU_GREY;
         assert_eq!((specs[0].camera, specs[0].inverted_depth), (Some(nyu.camera), Some(nyu.inverted_depth)));
         assert_eq!(rest, args("--out o"));
         assert_eq!(parse_specs(&args("--data synthetic")).unwrap().0, vec![DataSpec::synthetic()]);
+    }
+
+    #[test]
+    fn synthetic_families_parse_with_their_strength() {
+        let (specs, _) = parse_specs(&args("--data synthetic:stripes --data synthetic:kinect@0.5")).unwrap();
+        assert_eq!(specs[0].family, Some((scenegen::Family::Stripes, 1.0)));
+        assert_eq!(specs[1].family, Some((scenegen::Family::Kinect, 0.5)));
+        assert_eq!(specs[1].dir, None);
+        assert_eq!(specs[1].synthetic_name().as_deref(), Some("synthetic:kinect@0.5"));
+        assert_eq!(DataSpec::synthetic().synthetic_name().as_deref(), Some("synthetic"));
+        for bad in ["synthetic:nope", "synthetic:stripes@x", "synthetic:stripes@-1", "synthetic:abw@11"] {
+            let err = DataSpec::parse(bad).unwrap_err();
+            assert!(format!("{err:#}").contains(bad), "{err:#}");
+        }
+        // A folder that happens to start with `synthetic` but has no colon is a folder.
+        assert_eq!(DataSpec::parse("synthetic-abw").unwrap(), DataSpec::folder("synthetic-abw"));
     }
 
     #[test]
@@ -315,10 +364,10 @@ mod tests {
         rangeio::abw::write_range(&dir.join("k.7.range"), &range).unwrap();
         rangeio::abw::write_labels(&dir.join("k.7.gt-seg"), &LabelImage::new(4, 4, 10)).unwrap();
         rangeio::abw::write_range(&dir.join("unlabelled.range"), &range).unwrap();
-        let spec = DataSpec { dir: Some(dir.clone()), camera: None, inverted_depth: None };
+        let spec = DataSpec::folder(&dir);
         let err = discover(Path::new("."), &spec, Role::Eval).unwrap_err();
         assert!(format!("{err:#}").contains("k.7.range: no camera"), "{err:#}");
-        let spec = DataSpec { dir: Some(dir.clone()), camera: Some(Camera::Grid), inverted_depth: None };
+        let spec = DataSpec { camera: Some(Camera::Grid), ..DataSpec::folder(&dir) };
         let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
         assert_eq!(set.images.len(), 1);
         assert_eq!(set.images[0].stem, "k.7");
@@ -335,7 +384,7 @@ mod tests {
         rangeio::abw::write_range(&dir.join("nyu.15.range"), &rangeimage::RangeImage::new(4, 4, 100.0))
             .unwrap();
         rangeio::abw::write_labels(&dir.join("nyu.15.gt-seg"), &LabelImage::new(4, 4, 10)).unwrap();
-        let spec = DataSpec { dir: Some(dir.clone()), camera: None, inverted_depth: None };
+        let spec = DataSpec::folder(&dir);
         let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
         let nyu = rangeio::NYU_GREY;
         assert_eq!(

@@ -16,8 +16,7 @@ struct Options {
     out: PathBuf,
 }
 
-const EVAL_USAGE: &str =
-    "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic [--camera CAM]] [--out DIR]";
+const EVAL_USAGE: &str = "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM]] [--out DIR]";
 
 fn parse(root: &Path, args: &[String]) -> Result<Options> {
     let (mut specs, rest) = data::parse_specs(args)?;
@@ -103,6 +102,8 @@ fn evaluate_one(
     let t = Instant::now();
     let LoadedImage { frame, gt, angles, .. } = img.load()?;
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
+    // The image's own noise and quantisation, for the report (not an input of the pipeline).
+    let noise = planefit::noise::estimate(&frame.range);
 
     let t_total = Instant::now();
     let out = seg.segment(&frame.range, &frame.camera);
@@ -128,6 +129,8 @@ fn evaluate_one(
         total_ms,
         relax_energy_before: out.fin.relax_info.energy_before,
         relax_energy_after: out.fin.relax_info.energy_after,
+        noise_sigma: noise.sigma,
+        noise_step: noise.step,
         figure: fig_path,
     })
 }

@@ -5,6 +5,11 @@
 //! The data files themselves are not committed: [`ensure_synthetic_data`] regenerates them on
 //! first use and checks them against the manifest, so a change to the generator (or to the ABW
 //! writers) is caught unless the manifest is updated deliberately with `cargo xtask gen-data`.
+//!
+//! `--family NAME [--strength S]` writes an artefact family set instead ([`scenegen::family_image`]:
+//! 10 train + 20 test images, same names), by default into `target/synthetic/NAME-sS/`, where
+//! `--data synthetic:NAME@S` regenerates it on every use ([`ensure_family_data`]); its manifest is
+//! written but not committed.
 
 // A command-line tool: printing its results is its job.
 #![allow(clippy::print_stdout)]
@@ -37,7 +42,30 @@ struct ImageId {
 /// `(file name, sha256 hex)` of every benchmark file, in manifest order.
 type Hashes = Vec<(String, String)>;
 
-fn image_ids() -> Vec<ImageId> {
+/// Which images a set holds and how each is generated: the benchmark, or an artefact family at a strength.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum SetKind {
+    Benchmark,
+    Family(scenegen::Family, f64),
+}
+
+impl SetKind {
+    fn counts(self) -> (u32, u32) {
+        match self {
+            SetKind::Benchmark => (scenegen::TRAIN_IMAGES, scenegen::TEST_IMAGES),
+            SetKind::Family(..) => (scenegen::FAMILY_TRAIN_IMAGES, scenegen::FAMILY_TEST_IMAGES),
+        }
+    }
+
+    fn image(self, id: &ImageId) -> (scenegen::Params, u64) {
+        match self {
+            SetKind::Benchmark => scenegen::benchmark_image(id.test, id.index),
+            SetKind::Family(f, s) => scenegen::family_image(f, s, id.test, id.index),
+        }
+    }
+}
+
+fn set_ids(kind: SetKind) -> Vec<ImageId> {
     let split = |test: bool, n: u32| {
         (0..n).map(move |index| ImageId {
             stem: format!("abw.{}.{index}", if test { "test" } else { "train" }),
@@ -45,18 +73,20 @@ fn image_ids() -> Vec<ImageId> {
             index,
         })
     };
-    split(false, scenegen::TRAIN_IMAGES).chain(split(true, scenegen::TEST_IMAGES)).collect()
+    let (train, test) = kind.counts();
+    split(false, train).chain(split(true, test)).collect()
 }
 
-/// Generates every benchmark scene, in parallel; the result is in [`image_ids`] order and does
+/// Generates every scene of a set, in parallel; the result is in [`set_ids`] order and does
 /// not depend on the thread count (each scene is generated on one thread from its own seed).
-fn generate_all() -> Vec<(ImageId, Scene)> {
-    image_ids()
+fn generate_set(kind: SetKind) -> Result<Vec<(ImageId, Scene)>> {
+    set_ids(kind)
         .into_par_iter()
         .map(|id| {
-            let (params, seed) = scenegen::benchmark_image(id.test, id.index);
+            let (params, seed) = kind.image(&id);
+            params.validate().map_err(|e| anyhow::anyhow!("{}: {e}", id.stem))?;
             let scene = scenegen::generate(&params, seed);
-            (id, scene)
+            Ok((id, scene))
         })
         .collect()
 }
@@ -73,8 +103,14 @@ fn write_scene(dir: &Path, stem: &str, scene: &Scene) -> Result<()> {
 }
 
 /// Every data file name of the benchmark, sorted bytewise (the manifest order).
+#[cfg(test)]
 fn file_names() -> Vec<String> {
-    let mut names: Vec<String> = image_ids()
+    set_file_names(SetKind::Benchmark)
+}
+
+/// Every data file name of a set, sorted bytewise (the manifest order).
+fn set_file_names(kind: SetKind) -> Vec<String> {
+    let mut names: Vec<String> = set_ids(kind)
         .iter()
         .flat_map(|id| EXTENSIONS.iter().map(move |e| format!("{}.{e}", id.stem)))
         .collect();
@@ -91,7 +127,12 @@ fn sha256_hex(bytes: &[u8]) -> String {
 
 /// `(name, sha256)` of every benchmark file in `dir`; a missing file has the hash `"missing"`.
 fn hash_files(dir: &Path) -> Hashes {
-    file_names()
+    hash_set_files(dir, SetKind::Benchmark)
+}
+
+/// `(name, sha256)` of every file of a set in `dir`; a missing file has the hash `"missing"`.
+fn hash_set_files(dir: &Path, kind: SetKind) -> Hashes {
+    set_file_names(kind)
         .into_par_iter()
         .map(|name| {
             let hash =
@@ -140,11 +181,30 @@ fn differences(expected: &[(String, String)], actual: &[(String, String)]) -> Ve
 
 /// Generates the benchmark into `dir` and returns the scenes and the hashes of the written files.
 fn generate_into(dir: &Path) -> Result<(Vec<(ImageId, Scene)>, Hashes)> {
+    generate_set_into(dir, SetKind::Benchmark)
+}
+
+/// Generates a set into `dir` and returns the scenes and the hashes of the written files.
+fn generate_set_into(dir: &Path, kind: SetKind) -> Result<(Vec<(ImageId, Scene)>, Hashes)> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
-    let scenes = generate_all();
+    let scenes = generate_set(kind)?;
     scenes.par_iter().try_for_each(|(id, scene)| write_scene(dir, &id.stem, scene))?;
-    Ok((scenes, hash_files(dir)))
+    Ok((scenes, hash_set_files(dir, kind)))
+}
+
+/// The default folder of a family set: `target/synthetic/NAME-sSTRENGTH`.
+pub fn family_dir(root: &Path, family: scenegen::Family, strength: f64) -> PathBuf {
+    root.join("target/synthetic").join(format!("{}-s{strength}", family.name()))
+}
+
+/// Generates the set of `family` at `strength` into [`family_dir`] (every time: it takes seconds and
+/// can never be stale) and returns the directory.
+pub fn ensure_family_data(root: &Path, family: scenegen::Family, strength: f64) -> Result<PathBuf> {
+    let dir = family_dir(root, family, strength);
+    let (_, hashes) = generate_set_into(&dir, SetKind::Family(family, strength))?;
+    rangeio::write_atomic(&dir.join(MANIFEST), manifest_text(&hashes).as_bytes())?;
+    Ok(dir)
 }
 
 /// Makes sure `root/data/synthetic-abw` holds the benchmark exactly as the committed manifest
@@ -214,20 +274,57 @@ fn render_figures(root: &Path, scenes: &[(ImageId, Scene)]) -> Result<()> {
     Ok(())
 }
 
-/// `cargo xtask gen-data [--out DIR] [--check] [--figures]`.
+/// `cargo xtask gen-data [--out DIR] [--check] [--figures] [--family NAME [--strength S]]`.
 pub fn run(args: &[String]) -> Result<()> {
     let root = crate::project_root();
-    let mut out = root.join(DATA_DIR);
+    let mut out = None;
     let (mut check, mut figures) = (false, false);
+    let (mut family, mut strength) = (None, 1.0);
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
-            "--out" => out = PathBuf::from(it.next().context("--out needs a directory")?),
+            "--out" => out = Some(PathBuf::from(it.next().context("--out needs a directory")?)),
             "--check" => check = true,
             "--figures" => figures = true,
+            "--family" => {
+                let name = it.next().context("--family needs a name")?;
+                family = Some(
+                    crate::data::DataSpec::parse(&format!("synthetic:{name}"))?.family.context("family")?.0,
+                );
+            }
+            "--strength" => {
+                let v = it.next().context("--strength needs a number")?;
+                strength = v
+                    .parse()
+                    .ok()
+                    .filter(|x: &f64| (0.0..=10.0).contains(x))
+                    .with_context(|| format!("--strength {v}: must be a number in 0..=10"))?;
+            }
             other => bail!("gen-data: unknown argument `{other}`\n\n{}", crate::USAGE),
         }
     }
+    if family.is_none() && args.iter().any(|a| a == "--strength") {
+        bail!("gen-data: --strength needs --family");
+    }
+    if let Some(family) = family {
+        if check || figures {
+            bail!("gen-data: --check and --figures are for the benchmark, not with --family");
+        }
+        let out = out.unwrap_or_else(|| family_dir(&root, family, strength));
+        let start = Instant::now();
+        let (scenes, hashes) = generate_set_into(&out, SetKind::Family(family, strength))?;
+        rangeio::write_atomic(&out.join(MANIFEST), manifest_text(&hashes).as_bytes())?;
+        print_stats(&scenes);
+        println!(
+            "wrote {} files of family {} at strength {strength} to {} in {:.2?}",
+            hashes.len(),
+            family.name(),
+            out.display(),
+            start.elapsed()
+        );
+        return Ok(());
+    }
+    let out = out.unwrap_or_else(|| root.join(DATA_DIR));
     let committed = root.join(DATA_DIR).join(MANIFEST);
     let start = Instant::now();
     if check {
@@ -290,6 +387,27 @@ mod tests {
         let _ = std::fs::remove_dir_all(&scratch);
         let diff = differences(&expected, &actual);
         assert!(diff.is_empty(), "generator differs from the manifest:\n{}", diff.join("\n"));
+    }
+
+    #[test]
+    fn family_sets_have_both_splits_and_differ_from_the_benchmark() {
+        let root = crate::project_root();
+        let family = scenegen::Family::Staircase;
+        let dir = ensure_family_data(&root, family, 1.0).expect("family set");
+        assert_eq!(dir, family_dir(&root, family, 1.0));
+        let spec = crate::data::DataSpec::parse("synthetic:staircase@1").expect("spec");
+        let test = crate::data::discover(&root, &spec, crate::data::Role::Eval).expect("test split");
+        let train = crate::data::discover(&root, &spec, crate::data::Role::Tune).expect("train split");
+        assert_eq!((test.images.len(), train.images.len()), (20, 10));
+        assert_eq!(test.name, "synthetic:staircase@1");
+        assert_eq!(test.selection, "test split");
+        // Written as the manifest says, and not the benchmark's files.
+        let manifest = parse_manifest(&dir.join(MANIFEST)).expect("manifest");
+        assert_eq!(manifest, hash_set_files(&dir, SetKind::Family(family, 1.0)));
+        assert_eq!(manifest.len(), 90);
+        let benchmark = parse_manifest(&root.join(DATA_DIR).join(MANIFEST)).expect("committed manifest");
+        let same = manifest.iter().filter(|m| benchmark.contains(m)).count();
+        assert_eq!(same, 0, "family files equal to benchmark files");
     }
 
     #[test]

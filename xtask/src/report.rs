@@ -25,6 +25,11 @@ pub(crate) struct ImageRow {
     pub(crate) total_ms: f64,
     pub(crate) relax_energy_before: f64,
     pub(crate) relax_energy_after: f64,
+    /// Robust depth noise σ of the range image around local planes, quantisation included
+    /// (`planefit::noise::estimate`), in its depth units.
+    pub(crate) noise_sigma: f64,
+    /// The image's depth quantisation step, if any.
+    pub(crate) noise_step: Option<f64>,
     #[serde(skip)]
     pub(crate) figure: PathBuf,
 }
@@ -277,15 +282,50 @@ fn per_image_table(rows: &[ImageRow]) -> Table {
                 format!("{:.3}", s.c1.matched.f),
                 format!("{:.3}", s.c2.matched.f),
                 format!("{:.3}", s.relaxed.matched.f),
+                noise_cell(x),
             ]
         })
         .collect();
     (
         "Per image: region growing alone, final segmentation and the three edge maps",
-        "Hoover correct detections at T = 0.8, the final segmentation's over-/under-segmentations and noise regions, one-to-one boundary F of C1, C2 and the final edge map C.".into(),
-        vec!["image", "GT regions", "correct (RG)", "correct (final)", "over / under", "noise", "F C1", "F C2", "F C"],
+        "Hoover correct detections at T = 0.8, the final segmentation's over-/under-segmentations and noise regions, one-to-one boundary F of C1, C2 and the final edge map C; the range image's own depth noise σ (robust scale of 5 × 5 plane-fit residuals, quantisation included) and quantisation step, in its depth units.".into(),
+        vec![
+            "image",
+            "GT regions",
+            "correct (RG)",
+            "correct (final)",
+            "over / under",
+            "noise",
+            "F C1",
+            "F C2",
+            "F C",
+            "depth σ / step",
+        ],
         per_image,
     )
+}
+
+/// `σ / step` of an image's depth noise estimate (`—` where there is no step or too little data).
+fn noise_cell(x: &ImageRow) -> String {
+    let sigma = if x.noise_sigma.is_nan() { "—".to_string() } else { format!("{:.2}", x.noise_sigma) };
+    let step = x.noise_step.map_or_else(|| "—".to_string(), |q| format!("{q:.3}"));
+    format!("{sigma} / {step}")
+}
+
+/// The range of the images' noise estimates, e.g. `depth σ 0.55–0.81, step 1.000`.
+fn noise_range(rows: &[ImageRow]) -> String {
+    let sig: Vec<f64> = rows.iter().map(|x| x.noise_sigma).filter(|s| s.is_finite()).collect();
+    let lo = sig.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = sig.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut steps: Vec<String> =
+        rows.iter().map(|x| x.noise_step.map_or_else(|| "none".to_string(), |q| format!("{q:.3}"))).collect();
+    steps.sort();
+    steps.dedup();
+    if sig.is_empty() {
+        format!("depth σ —, step {}", steps.join("/"))
+    } else {
+        format!("depth σ {lo:.2}–{hi:.2}, step {}", steps.join("/"))
+    }
 }
 
 /// Per-stage timings.
@@ -429,7 +469,7 @@ pub(crate) fn summary(r: &Report) -> String {
     let m = |f: &dyn Fn(&ImageScores) -> f64| mean_std(rows.iter().map(|x| f(&x.scores))).0;
     let gt = m(&|s| f64::from(s.hoover_final.gt_regions));
     format!(
-        "{}: Hoover T=0.8 correct {:.2} of {:.2} ({:.1} %; region growing alone {:.2}), over {:.2}, under {:.2}, Jin rate {:.1} % | F(1:1) raw {:.3}, C2 {:.3}, C1 {:.3}, final {:.3} | precision vs C1 C2 {:.4} -> final {:.4}",
+        "{}: Hoover T=0.8 correct {:.2} of {:.2} ({:.1} %; region growing alone {:.2}), over {:.2}, under {:.2}, Jin rate {:.1} % | F(1:1) raw {:.3}, C2 {:.3}, C1 {:.3}, final {:.3} | precision vs C1 C2 {:.4} -> final {:.4} | {}",
         r.data_name,
         m(&|s| f64::from(s.hoover_final.correct)),
         gt,
@@ -445,20 +485,21 @@ pub(crate) fn summary(r: &Report) -> String {
         m(&|s| s.relaxed.matched.f),
         m(&|s| opt(s.c2.paper_precision_c1)),
         m(&|s| opt(s.relaxed.paper_precision_c1)),
+        noise_range(rows),
     )
 }
 
 /// One CSV line per image with the main figures.
 fn csv(r: &Report) -> String {
     let mut s = String::from(
-        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms\n",
+        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms,noise_sigma,noise_step\n",
     );
     for x in &r.rows {
         let s_ = &x.scores;
         let (h, g) = (&s_.hoover_final, &s_.hoover_regiongrow);
         let _ = writeln!(
             s,
-            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2}",
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{}",
             x.stem,
             s_.raw_canny.matched.f,
             opt(s_.raw_canny.paper_precision_c1),
@@ -485,7 +526,9 @@ fn csv(r: &Report) -> String {
             x.timings.regiongrow,
             x.timings.vcanny,
             x.timings.relax,
-            x.total_ms
+            x.total_ms,
+            x.noise_sigma,
+            x.noise_step.map_or_else(String::new, |q| format!("{q:.4}"))
         );
     }
     s

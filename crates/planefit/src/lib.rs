@@ -7,6 +7,10 @@
 //! points; the final segmentation picks the first smallest and always gives a plane. Both use the
 //! same sums, covariance and eigen solver from here, so their planes are what they were when each
 //! had its own copy, bit for bit.
+//!
+//! [`noise`] measures an image's own depth noise and quantisation step from local plane fits.
+
+pub mod noise;
 
 use nalgebra::{Matrix3, SymmetricEigen};
 

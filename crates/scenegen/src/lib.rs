@@ -7,6 +7,8 @@
 //! optical axis, so each planar face is intersected analytically per pixel); removes what a
 //! structured-light projector offset by a horizontal baseline cannot see (shadows); adds
 //! Gaussian depth noise, mixed pixels at jump edges and dropout blobs; and quantises to 8 bits.
+//! Optional artefact families ([`Family`]: scanner stripes, quantisation staircases, Kinect-like
+//! depth-dependent noise and holes) model other sensors; the benchmark uses none of them.
 //!
 //! Ground truth follows the ABW rules: one label per connected visible piece of a plane,
 //! numbered from 10 in raster order of first appearance; 0 on no-data pixels and pieces under
@@ -17,9 +19,12 @@
 //! Everything is computed with IEEE `+ − × ÷ √` on one thread from one
 //! `Xoshiro256PlusPlus` stream, so a seed gives bit-identical scenes on every platform.
 
+mod family;
 mod layout;
 mod math;
 mod render;
+
+pub use family::{FAMILY_TEST_IMAGES, FAMILY_TRAIN_IMAGES, Family, Kinect, Staircase, Stripes, family_image};
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
@@ -64,6 +69,12 @@ pub struct Params {
     pub projector_baseline_mm: f64,
     /// Ground-truth regions smaller than this get label 0.
     pub min_region_px: u32,
+    /// Scanner stripes along the scan direction, on top of the noise (none in the benchmark).
+    pub stripes: Option<Stripes>,
+    /// Range rounded to a coarser step than 8 bits (none in the benchmark).
+    pub staircase: Option<Staircase>,
+    /// Kinect-like depth-dependent noise, disparity quantisation and holes (none in the benchmark).
+    pub kinect: Option<Kinect>,
 }
 
 impl Default for Params {
@@ -85,6 +96,9 @@ impl Default for Params {
             shadows: true,
             projector_baseline_mm: 200.0,
             min_region_px: 100,
+            stripes: None,
+            staircase: None,
+            kinect: None,
         }
     }
 }
@@ -141,7 +155,7 @@ impl Params {
                 format!("{cal:?} needs scal, offset, c > 0 and f ≠ 0"),
             ));
         }
-        Ok(())
+        family::validate(self)
     }
 }
 
@@ -168,7 +182,7 @@ pub fn generate(params: &Params, seed: u64) -> Scene {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let layout = layout::random_layout(params, &mut rng);
     tracing::debug!(pieces = layout.pieces.len(), "layout");
-    let scene = render::render(params, &layout, &mut rng);
+    let scene = render::render(params, &layout, &mut rng, seed);
     tracing::debug!(regions = scene.angles.len(), "rendered");
     scene
 }

@@ -3,8 +3,8 @@
 use crate::layout::Layout;
 use crate::math::{V3, add, angle_deg, cross, dot, norm, normalize, scale, sub};
 use crate::{Params, Scene};
-use rand::RngExt;
 use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
 use rangeimage::{Grid, LabelImage};
 use std::collections::BTreeSet;
 
@@ -69,19 +69,30 @@ fn slab(planes: &[(V3, f64, u32)], o: V3, r: V3) -> Option<(f64, f64, u32)> {
 }
 
 /// Gaussian draw from the Irwin–Hall sum of 12 uniforms (unit variance, exactly portable).
-fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
+pub(crate) fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
     (0..12).map(|_| rng.random::<f64>()).sum::<f64>() - 6.0
 }
 
 /// Renders `layout` into a scene with artefacts and ground truth.
-pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusPlus) -> Scene {
+///
+/// The artefact families draw from their own streams, seeded from `seed`, so that without them
+/// `rng` is used exactly as the benchmark always used it.
+pub(crate) fn render(params: &Params, layout: &Layout, rng: &mut Xoshiro256PlusPlus, seed: u64) -> Scene {
     let world = World::build(params, layout);
     let hits = cast_primary(params, &world);
     let v_clean = clean_values(params, &world, &hits);
     let v_out = mixed_pixels(params, &world, &hits, &v_clean, rng);
-    let mut range = quantise(params, &v_out, rng);
+    let mut range = quantise(params, &v_out, rng, seed);
     dropouts(params, &mut range, rng);
+    if let Some(k) = &params.kinect {
+        kinect_holes(params, k, &world, &hits, &v_out, &mut range, seed);
+    }
     ground_truth(params, &world, &hits, range)
+}
+
+/// A random stream of its own for one artefact family of the scene of `seed`.
+fn side_stream(seed: u64, family: u64) -> Xoshiro256PlusPlus {
+    Xoshiro256PlusPlus::seed_from_u64(seed ^ (0xA27E_FAC7_0000_0000 | family))
 }
 
 /// The scene in the camera frame: the camera, the projector, every face plane `(n, e)` (table
@@ -322,17 +333,60 @@ fn mixed_pixels(
     v_out
 }
 
-/// Depth noise and 8-bit quantisation (0 = no data).
-fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus) -> Grid<u8> {
+/// Depth noise, the artefact families' stripes, Kinect model and staircase, and 8-bit
+/// quantisation (0 = no data).
+fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus, seed: u64) -> Grid<u8> {
     let (w, h) = (params.width_px, params.height_px);
     let mut range = Grid::new(w, h, 0u8);
+    let stripes = params.stripes.map(|s| crate::family::stripe_field(&s, w, h, &mut side_stream(seed, 1)));
+    let mut kinect_rng = side_stream(seed, 2);
     for (i, px) in range.as_mut_slice().iter_mut().enumerate() {
         let g = gauss(rng);
+        // Drawn for every pixel so the stream does not depend on which pixels hold data.
+        let gk = if params.kinect.is_some() { gauss(&mut kinect_rng) } else { 0.0 };
         if !v_out[i].is_nan() {
-            *px = (v_out[i] + params.noise_sigma_v * g).round().clamp(1.0, 255.0) as u8;
+            let mut v = v_out[i] + params.noise_sigma_v * g;
+            if let Some(f) = &stripes {
+                v += f[i];
+            }
+            if let Some(k) = &params.kinect {
+                v = k.measure(v, gk);
+            }
+            if let Some(s) = &params.staircase {
+                v = (v / s.step_v).round() * s.step_v;
+            }
+            *px = v.round().clamp(1.0, 255.0) as u8;
         }
     }
     range
+}
+
+/// Kinect holes: no data, with a probability rising on grazing surfaces and at far range.
+fn kinect_holes(
+    params: &Params,
+    k: &crate::Kinect,
+    world: &World,
+    hits: &Hits,
+    v_out: &[f64],
+    range: &mut Grid<u8>,
+    seed: u64,
+) {
+    let (w, h) = (params.width_px, params.height_px);
+    let mut rng = side_stream(seed, 3);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y as usize * w as usize + x as usize;
+            let u = rng.random::<f64>();
+            if range[(x, y)] == 0 || hits.face[i] == NO_FACE || v_out[i].is_nan() {
+                continue;
+            }
+            let r = world.cam.dir(f64::from(x), f64::from(y));
+            let cos = dot(world.faces[hits.face[i] as usize].0, r).abs() / norm(r);
+            if u < k.hole_probability(k.depth_mm(v_out[i]), cos) {
+                range[(x, y)] = 0;
+            }
+        }
+    }
 }
 
 /// Dropouts: small round blobs of no data.
