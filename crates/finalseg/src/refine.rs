@@ -110,13 +110,7 @@ pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], planes: &mut [Plane], buf
 /// within `limit`). "Fits" is a Potts energy: the squared distance to the region's plane in units
 /// of the noise (the largest RMS of the candidate planes, at least `SIGMA_FLOOR`), plus `BETA` per
 /// 8-neighbour of another label, so that noise near a shallow crease does not fray the border.
-fn better_label(
-    scene: &Scene<'_>,
-    groups: &[u32],
-    planes: &[Plane],
-    i: usize,
-    limit: Limit,
-) -> Option<u32> {
+fn better_label(scene: &Scene<'_>, groups: &[u32], planes: &[Plane], i: usize, limit: Limit) -> Option<u32> {
     let (w, h) = (scene.w, scene.h);
     let own = groups[i];
     let p = scene.point(i % w, i / w)?;
