@@ -59,6 +59,18 @@ impl Ctx<'_> {
     }
 }
 
+/// Sizes the padded buffers of a `w × h` frame for a geometry pass and returns the padded width:
+/// `geo` zeroed or the previous frame's (every interior record is written by the pass) with a NaN
+/// frame, every label `BLOCKED`.
+#[inline(always)]
+fn padded_buffers(w: usize, h: usize, (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>)) -> usize {
+    let pw = w + 2;
+    sized(geo, pw * (h + 2));
+    set_frame(geo, pw, [f32::NAN; 6]);
+    filled(labels, pw * (h + 2), BLOCKED);
+    pw
+}
+
 /// Sets the one-pixel frame of a padded array of width `pw` to `v`.
 fn set_frame<T: Copy>(a: &mut [T], pw: usize, v: T) {
     let n = a.len();
@@ -296,11 +308,7 @@ fn geometry_abw(
     origin: [f64; 3],
     (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
 ) -> usize {
-    let pw = w + 2;
-    // Zeroed or the previous frame's (no fill pass); every interior record is written below, the frame here.
-    sized(geo, pw * (h + 2));
-    set_frame(geo, pw, [f32::NAN; 6]);
-    filled(labels, pw * (h + 2), BLOCKED);
+    let pw = padded_buffers(w, h, (geo, labels));
     let paper = params.mode == Mode::Paper;
     let max_c = params.max_curvedness;
     let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
@@ -381,11 +389,7 @@ fn geometry_pinhole(
     origin: [f64; 3],
     (geo, labels): (&mut Vec<[f32; 6]>, &mut Vec<u32>),
 ) -> usize {
-    let pw = w + 2;
-    // Zeroed or the previous frame's (no fill pass); every interior record is written below, the frame here.
-    sized(geo, pw * (h + 2));
-    set_frame(geo, pw, [f32::NAN; 6]);
-    filled(labels, pw * (h + 2), BLOCKED);
+    let pw = padded_buffers(w, h, (geo, labels));
     let max_c = params.max_curvedness;
     let cos_slant = f64::from(params.max_slant_deg).to_radians().cos();
     let [o0, o1, o2] = origin;
