@@ -19,42 +19,6 @@ fn cols(e: &EdgeMap) -> Vec<u32> {
     c
 }
 
-/// Naive 5×5 least-squares planes over valid pixels, x and y from the image centre (test helper).
-pub(crate) fn naive_planes(range: &RangeImage) -> PlaneMap {
-    let (w, h) = range.dimensions();
-    let (cx, cy) = ((f64::from(w) - 1.0) / 2.0, (f64::from(h) - 1.0) / 2.0);
-    Grid::from_fn(w, h, |x, y| {
-        if !range[(x, y)].is_finite() {
-            return [NAN; 3];
-        }
-        let mut s = [0.0f64; 9];
-        for yy in y.saturating_sub(2)..(y + 3).min(h) {
-            for xx in x.saturating_sub(2)..(x + 3).min(w) {
-                let z = range[(xx, yy)];
-                if z.is_finite() {
-                    let (xf, yf, zf) = (f64::from(xx) - cx, f64::from(yy) - cy, f64::from(z));
-                    for (k, v) in
-                        [1.0, xf, yf, xf * xf, xf * yf, yf * yf, zf, xf * zf, yf * zf].iter().enumerate()
-                    {
-                        s[k] += v;
-                    }
-                }
-            }
-        }
-        let n = s[0];
-        let (mx, my, mz) = (s[1] / n, s[2] / n, s[6] / n);
-        let (cxx, cxy, cyy) = (s[3] - n * mx * mx, s[4] - n * mx * my, s[5] - n * my * my);
-        let (cxz, cyz) = (s[7] - n * mx * mz, s[8] - n * my * mz);
-        let det = cxx * cyy - cxy * cxy;
-        if n < 3.0 || det.abs() < 1e-9 {
-            return [NAN; 3];
-        }
-        let a = (cyy * cxz - cxy * cyz) / det;
-        let b = (cxx * cyz - cxy * cxz) / det;
-        [a as f32, b as f32, (mz - a * mx - b * my) as f32]
-    })
-}
-
 #[test]
 fn hand_worked_step_gives_one_column() {
     // Columns 0..=3 at 0, column 4 at 5 (the only maximum of the gradient), 5.. at 10.
@@ -192,7 +156,7 @@ fn plane_channels_find_a_crease_the_depth_hides_and_ignore_quantisation() {
     // A roof z = 100 + 0.5·|x − 32| quantised to integers: depth is continuous at the crease,
     // slopes jump from −0.5 to 0.5.
     let roof = Grid::from_fn(64, 48, |x, y| (100.0 + 0.5 * (x as f32 - 32.0).abs() + 0.3 * y as f32).round());
-    let planes = naive_planes(&roof);
+    let planes = features::fit_planes(&roof, 5);
     let valid = roof.map(|v| v.is_finite());
     let e = detect_planes(&planes, &valid, &Params::default());
     let c = cols(&e.edges);
@@ -204,7 +168,7 @@ fn plane_channels_find_a_crease_the_depth_hides_and_ignore_quantisation() {
     let mut p = Params::default();
     p.thresholds.low = 6.0;
     p.thresholds.high = 12.0;
-    let e = detect_planes(&naive_planes(&slope), &valid, &p);
+    let e = detect_planes(&features::fit_planes(&slope, 5), &valid, &p);
     assert_eq!(e.edges.as_slice().iter().filter(|&&v| v).count(), 0);
 }
 
