@@ -73,7 +73,7 @@ fn layering_problems(doc: &toml::Table) -> Vec<String> {
                 table == "dev-dependencies" && STAGES.contains(&name) && DEV_INPUTS_FOR_STAGES.contains(&dep);
             if FORBIDDEN_FOR_STAGES.contains(&dep) && dep != name && !dev_input {
                 problems.push(format!(
-                    "stage crate {name} depends on {dep} in [{table}]; stages depend only on rangeimage"
+                    "stage crate {name} depends on {dep} in [{table}]; stages depend only on the shared crates (rangeimage, planefit, isa) and math or utility crates"
                 ));
             }
         }
