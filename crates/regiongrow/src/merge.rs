@@ -332,10 +332,12 @@ pub(crate) fn merge<const N: usize>(
         changed.fill(false);
     }
     if n_merged > 0 {
+        // Every label's root once, then one table look-up per pixel (label 0 is its own root).
+        for l in 0..=max_label {
+            parent[l as usize] = find(parent, l);
+        }
         for l in labels.iter_mut() {
-            if *l != 0 {
-                *l = find(parent, *l);
-            }
+            *l = parent[*l as usize];
         }
     }
     Merged { n_merged, n_passes }
