@@ -38,11 +38,18 @@ pub struct PipelineParams {
     pub relax: bool,
     /// What the final edge map C is.
     pub final_edges: FinalEdges,
+    /// Run pinhole images (and grid images of unusual noise) in working units of a fixed noise level ([`crate::units`]).
+    pub normalize_units: bool,
 }
 
 impl Default for PipelineParams {
     fn default() -> Self {
-        Self { c1_strength: C1Strength::default(), relax: true, final_edges: FinalEdges::default() }
+        Self {
+            c1_strength: C1Strength::default(),
+            relax: true,
+            final_edges: FinalEdges::default(),
+            normalize_units: true,
+        }
     }
 }
 
@@ -268,6 +275,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "pipeline.final_edges",
         "Final edge map C: \"segmentation\" (the final regions' borders) or \"relaxed\" (C1 ∪ supported C2, the paper).",
+    ),
+    (
+        "pipeline.normalize_units",
+        "Scale pinhole depth to a noise σ of 0.25 (and grid depth outside σ 0.25–1) so distances mean the same in any unit.",
     ),
     ("features", "Local planes, derivatives and curvatures (window sides in pixels, odd)."),
     ("features.window_px", "Window of the local plane fit (odd, ≥ 3)."),

@@ -7,6 +7,7 @@ pub mod evaluate;
 pub mod output;
 pub mod pipeline;
 pub mod planes;
+pub mod units;
 
 pub use config::{C1Strength, Config, ConfigError, FinalEdges, PipelineParams, RawCannyParams};
 pub use output::{OutputSet, write_outputs, write_selected_outputs};

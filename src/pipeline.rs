@@ -2,6 +2,7 @@
 //! [`Segmenter`] runs it on a stream of frames with the working buffers of the previous frame.
 
 use crate::config::{C1Strength, Config, FinalEdges};
+use crate::units::WorkingUnits;
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 use serde::Serialize;
 use std::path::Path;
@@ -35,6 +36,9 @@ pub struct Output {
     pub fin: Finish,
     /// Time per stage.
     pub timings: StageTimings,
+    /// The image's working units ([`crate::units`]): `features`, the regions' plane offsets and RMS and the
+    /// final regions' planes are in units of depth × `units.factor`; labels, edges and normals do not depend on it.
+    pub units: Option<WorkingUnits>,
 }
 
 /// What the last stage produces: relaxed edges and the final segmentation.
@@ -94,6 +98,10 @@ pub struct Segmenter {
 /// The working buffers of every stage, and the pipeline's own per-pixel maps.
 #[derive(Debug, Default)]
 struct Scratch {
+    /// The frame in working units, when they are not its own.
+    work: RangeImage,
+    /// The noise estimate's window RMS values.
+    noise: Vec<f64>,
     valid: Grid<bool>,
     s1: Grid<f32>,
     union: EdgeMap,
@@ -123,6 +131,19 @@ impl Segmenter {
         let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
         let Self { config, out, scratch } = self;
         let t = Instant::now();
+        let units = if config.pipeline.normalize_units {
+            crate::units::working_units_with(range, camera, &mut scratch.noise)
+        } else {
+            WorkingUnits::identity(camera)
+        };
+        let mut work = std::mem::take(&mut scratch.work);
+        let range = if units.is_identity() {
+            range
+        } else {
+            units.scale_into(range, &mut work);
+            &work
+        };
+        let camera = &units.camera;
         features::compute_into(range, &config.features, &mut out.features);
         let t_features = elapsed_ms(t);
 
@@ -155,6 +176,8 @@ impl Segmenter {
 
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
+        out.units = Some(units);
+        scratch.work = work;
         &self.out
     }
 

@@ -89,3 +89,52 @@ fn a_thin_strip_of_one_plane_is_one_region() {
         assert!(out.fin.labels.as_slice().iter().all(|&l| l == 1), "{w}×{h}: every pixel in the plane");
     }
 }
+
+/// The OpenNI frame of boxes on a floor (`data/real`, millimetres read as metres) and its camera.
+fn boxes_frame() -> rangeio::Frame {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/real/pcl-test/grabber_sequences/tiff/frame_20121214T142255.814212_depth.tiff");
+    rangeio::read(&path, &Default::default()).expect("read the OpenNI frame")
+}
+
+#[test]
+fn a_kinect_frame_in_metres_is_segmented_into_its_planes() {
+    // Run in its own units (metres, noise σ ≈ 1 mm), every distance parameter of a few units let the
+    // floor, the boxes and the laptop merge: 4 regions, the largest (the floor and more) with an RMS of
+    // 22 mm. In working units (src/units.rs) the floor is one plane of 2–3 mm RMS and the box faces are
+    // regions of their own.
+    let frame = boxes_frame();
+    let out = rangeseg::segment(&frame.range, &frame.camera, &Config::default());
+    let units = out.units.expect("units of the frame");
+    assert!(units.factor > 100.0, "metres are scaled up: {units:?}");
+    let planes = rangeseg::planes(&frame.range, &out.fin.labels, &frame.camera);
+    let floor = planes.iter().max_by_key(|p| p.pixels).expect("planes");
+    assert!(floor.rms < 0.005, "the largest region is one plane: RMS {} m", floor.rms);
+    let big = planes.iter().filter(|p| p.pixels >= 1000).count();
+    assert!(big >= 8, "{big} planes of ≥ 1000 pixels");
+
+    let off = Config {
+        pipeline: rangeseg::PipelineParams { normalize_units: false, ..Default::default() },
+        ..Default::default()
+    };
+    let raw = rangeseg::segment(&frame.range, &frame.camera, &off);
+    let raw_planes = rangeseg::planes(&frame.range, &raw.fin.labels, &frame.camera);
+    let raw_floor = raw_planes.iter().max_by_key(|p| p.pixels).expect("planes");
+    assert!(
+        raw_floor.rms > 0.01,
+        "without working units the floor merges with the boxes: RMS {}",
+        raw_floor.rms
+    );
+}
+
+#[test]
+fn the_result_does_not_depend_on_the_depth_unit() {
+    // Metres and centimetres become the same working image, up to the rounding of the ×100.
+    let frame = boxes_frame();
+    let metres = rangeseg::segment(&frame.range, &frame.camera, &Config::default());
+    let cm = frame.range.map(|&v| v * 100.0);
+    let centimetres = rangeseg::segment(&cm, &frame.camera, &Config::default());
+    let (a, b) = (metres.fin.labels.as_slice(), centimetres.fin.labels.as_slice());
+    let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
+    assert!(differ * 1000 < a.len(), "{differ} of {} labels differ between metres and centimetres", a.len());
+}

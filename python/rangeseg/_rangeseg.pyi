@@ -55,12 +55,21 @@ def parse_camera(spec: str) -> Camera:
     """A CLI camera spec: abw0, abw1, grid or pinhole:fx,fy,cx,cy[,depth_scale]; ValueError if malformed."""
 
 def read(
-    path: Union[str, "os.PathLike[str]"], camera: Optional[Camera] = None, depth_scale: Optional[float] = None
+    path: Union[str, "os.PathLike[str]"],
+    camera: Optional[Camera] = None,
+    depth_scale: Optional[float] = None,
+    nyu_grey: bool = False,
 ) -> Tuple[np.ndarray, Camera]:
-    """Reads a depth file (ABW rasterfile, PGM, PNG, TIFF, PCD): float32 depth (NaN = no data) and its camera."""
+    """Reads a depth file (ABW rasterfile, PGM, PNG, TIFF, PCD): float32 depth (NaN = no data) and its camera.
+
+    nyu_grey=True reads the 8-bit NYU frames of Jin et al. as the CLI's --nyu-grey (depth = 400 - grey)."""
 
 def read_bytes(
-    data: bytes, name: str, camera: Optional[Camera] = None, depth_scale: Optional[float] = None
+    data: bytes,
+    name: str,
+    camera: Optional[Camera] = None,
+    depth_scale: Optional[float] = None,
+    nyu_grey: bool = False,
 ) -> Tuple[np.ndarray, Camera]:
     """Like read, on a file's bytes; name chooses the ABW calibration and names the file in errors."""
 

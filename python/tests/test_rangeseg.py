@@ -48,6 +48,21 @@ def test_read_16bit_with_depth_scale_and_camera(tmp_path: Path) -> None:
     assert np.array_equal(metres[values != 0], expected[values != 0])
 
 
+def test_read_nyu_grey_as_the_cli(scene_file: Path, cli: Path) -> None:
+    raw = scene()
+    depth, camera = rangeseg.read(scene_file, nyu_grey=True)
+    assert np.array_equal(np.isnan(depth), raw == 0)
+    assert np.array_equal(depth[raw != 0], (400.0 - raw[raw != 0]).astype(np.float32))
+    info = subprocess.run([str(cli), "info", "--nyu-grey", str(scene_file)], capture_output=True, text=True)
+    assert f"fx={camera.fx:.2f} fy={camera.fy:.2f}" in info.stdout, (camera, info.stdout)
+    same, _ = rangeseg.read_bytes(scene_file.read_bytes(), "abw.test.19.range", nyu_grey=True)
+    assert np.array_equal(same, depth, equal_nan=True)
+    grid, cam = rangeseg.read(scene_file, camera=rangeseg.Grid(), nyu_grey=True)
+    assert cam == rangeseg.Grid() and np.array_equal(grid, depth, equal_nan=True)
+    with pytest.raises(ValueError):
+        rangeseg.read(scene_file, depth_scale=0.001, nyu_grey=True)
+
+
 def test_read_errors_carry_the_cli_message(tmp_path: Path, cli: Path) -> None:
     junk = tmp_path / "x.dat"
     junk.write_bytes(b"hello world, not an image")

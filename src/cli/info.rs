@@ -93,8 +93,15 @@ fn describe(path: &std::path::Path, f: &Frame) -> String {
         Some((lo, hi)) => format!("{lo:.4} .. {hi:.4}"),
         None => "none (no valid pixel)".into(),
     };
+    let est = planefit::noise::estimate(&f.range);
+    let noise = if est.sigma.is_finite() {
+        let step = est.step.map_or_else(|| "continuous".to_string(), |q| format!("step {q:.4}"));
+        format!("σ {:.4} around 5×5 planes, {step}", est.sigma)
+    } else {
+        "unknown (fewer than 20 full 5×5 windows)".into()
+    };
     format!(
-        "{}\n  format  {}, {}-bit\n  size    {}x{}\n  units   {}\n  camera  {}\n  valid   {:.2}% ({valid} of {n} pixels)\n  range   {range}\n",
+        "{}\n  format  {}, {}-bit\n  size    {}x{}\n  units   {}\n  camera  {}\n  valid   {:.2}% ({valid} of {n} pixels)\n  range   {range}\n  noise   {noise}\n",
         path.display(),
         f.format,
         f.bits_per_sample,

@@ -30,8 +30,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let seed = args.seed.unwrap_or(cfg.seed);
     super::prepare_out_dir(&args.out)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
-    let feats = features::compute(&frame.range, &cfg.features);
-    let (seg, info) = regiongrow::grow(&frame.range, &feats, &frame.camera, &cfg.regiongrow, seed);
+    let (range, camera) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
+    let feats = features::compute(&range, &cfg.features);
+    let (seg, info) = regiongrow::grow(&range, &feats, &camera, &cfg.regiongrow, seed);
 
     let name =
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());

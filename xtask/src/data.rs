@@ -27,12 +27,15 @@ pub struct DataSpec {
     pub camera: Option<Camera>,
     /// `ReadOptions::inverted_depth` of every image (set with the camera by `--camera nyu-grey`).
     pub inverted_depth: Option<f64>,
+    /// Every depth value is multiplied by this after reading (`--depth-scale M`: the same scenes in other
+    /// units, e.g. the NYU frames in metres-like units, to check that results do not depend on units).
+    pub depth_scale: Option<f64>,
 }
 
 impl DataSpec {
     /// The synthetic ABW-like benchmark.
     pub fn synthetic() -> Self {
-        Self { dir: None, family: None, camera: None, inverted_depth: None }
+        Self { dir: None, family: None, camera: None, inverted_depth: None, depth_scale: None }
     }
 
     /// A folder of labelled images.
@@ -81,7 +84,7 @@ impl DataSpec {
     }
 }
 
-/// Parses repeated `--data DIR [--camera CAM]` options (a `--camera` applies to the `--data` before it;
+/// Parses repeated `--data DIR [--camera CAM] [--depth-scale M]` options (a `--camera` or `--depth-scale` applies to the `--data` before it;
 /// `--data synthetic` names the synthetic benchmark, `--data synthetic:FAMILY[@STRENGTH]` a family set). Returns the specs and the arguments left over.
 pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
     let mut specs: Vec<DataSpec> = Vec::new();
@@ -108,6 +111,18 @@ pub fn parse_specs(args: &[String]) -> Result<(Vec<DataSpec>, Vec<String>)> {
                 }
                 (last.camera, last.inverted_depth) = (Some(camera), inverted_depth);
             }
+            "--depth-scale" => {
+                let v = it.next().context("--depth-scale needs a positive number")?;
+                let m: f64 = v
+                    .parse()
+                    .ok()
+                    .filter(|m: &f64| m.is_finite() && *m > 0.0)
+                    .with_context(|| format!("--depth-scale {v}: not a positive number"))?;
+                let last = specs.last_mut().context("--depth-scale must follow the --data it applies to")?;
+                if last.depth_scale.replace(m).is_some() {
+                    bail!("--depth-scale given twice for one --data");
+                }
+            }
             _ => rest.push(a.clone()),
         }
     }
@@ -129,6 +144,8 @@ pub struct LabelledImage {
     pub camera: Camera,
     /// `ReadOptions::inverted_depth` to read it with.
     pub inverted_depth: Option<f64>,
+    /// Multiplies every depth value after reading ([`DataSpec::depth_scale`]).
+    pub depth_scale: Option<f64>,
 }
 
 /// A labelled image read into memory.
@@ -154,6 +171,10 @@ impl LabelledImage {
                 ..Default::default()
             },
         )?;
+        let mut frame = frame;
+        if let Some(m) = self.depth_scale {
+            frame.range = frame.range.map(|&v| (f64::from(v) * m) as f32);
+        }
         let gt = rangeio::abw::read_labels(&self.gt_seg, true)?;
         if !gt.same_size(&frame.range) {
             bail!(
@@ -222,6 +243,7 @@ pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
                     gt_ang: img.gt_ang.clone(),
                     camera: spec.camera.unwrap_or(img.camera),
                     inverted_depth: spec.inverted_depth,
+                    depth_scale: spec.depth_scale,
                 });
             }
             if split == Split::Train { "training split" } else { "test split" }
@@ -238,6 +260,10 @@ pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
         (Some(c), None) => format!("{c:?}"),
         (Some(c), Some(o)) => format!("{c:?}, depth = {o} − stored value"),
         (None, _) => "by file name (ABW calibration 0 or 1; nyu.K: nyu-grey)".to_string(),
+    };
+    let camera = match spec.depth_scale {
+        Some(m) => format!("{camera}; depth × {m}"),
+        None => camera,
     };
     Ok(DataSet { name, dir, selection, camera, images })
 }
@@ -277,6 +303,7 @@ fn every_labelled(dir: &Path, spec: &DataSpec) -> Result<Vec<LabelledImage>> {
             gt_ang,
             camera,
             inverted_depth,
+            depth_scale: spec.depth_scale,
         });
     }
     images.sort_by_key(|img| natural_key(&img.stem));
@@ -324,6 +351,16 @@ mod tests {
         assert_eq!((specs[0].camera, specs[0].inverted_depth), (Some(nyu.camera), Some(nyu.inverted_depth)));
         assert_eq!(rest, args("--out o"));
         assert_eq!(parse_specs(&args("--data synthetic")).unwrap().0, vec![DataSpec::synthetic()]);
+        let (specs, _) = parse_specs(&args("--data n --camera nyu-grey --depth-scale 0.001")).unwrap();
+        assert_eq!(specs[0].depth_scale, Some(0.001));
+        for bad in [
+            "--depth-scale 2",
+            "--data n --depth-scale 0",
+            "--data n --depth-scale x",
+            "--data n --depth-scale 1 --depth-scale 2",
+        ] {
+            assert!(parse_specs(&args(bad)).is_err(), "{bad}");
+        }
     }
 
     #[test]

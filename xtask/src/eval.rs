@@ -16,7 +16,7 @@ struct Options {
     out: PathBuf,
 }
 
-const EVAL_USAGE: &str = "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM]] [--out DIR]";
+const EVAL_USAGE: &str = "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM] [--depth-scale M]] [--out DIR]";
 
 fn parse(root: &Path, args: &[String]) -> Result<Options> {
     let (mut specs, rest) = data::parse_specs(args)?;

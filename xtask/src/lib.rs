@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 pub const USAGE: &str = "usage: cargo xtask <command>
 
 commands:
-  eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM]] [--out DIR]
+  eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM] [--depth-scale M]] [--out DIR]
       Run one data set (default: the synthetic benchmark's test split, generated on first use;
       synthetic:FAMILY the 20 test images of an artefact family (abw, stripes, staircase, kinect) at strength S
       (default 1), generated into target/synthetic/FAMILY-sS/ on every use; a folder of

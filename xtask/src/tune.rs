@@ -455,11 +455,17 @@ fn read_images(sets: &[DataSet]) -> Result<Vec<Image>> {
     for (k, set) in sets.iter().enumerate() {
         for img in &set.images {
             let loaded = img.load()?;
+            // In the working units the pipeline runs it in (`normalize_units` is not tuned).
+            let (range, camera) = rangeseg::units::in_working_units(
+                &loaded.frame.range,
+                &loaded.frame.camera,
+                &rangeseg::Config::default(),
+            );
             images.push(Image {
                 set: k,
                 stem: loaded.stem,
-                range: loaded.frame.range,
-                camera: loaded.frame.camera,
+                range: range.into_owned(),
+                camera,
                 gt: loaded.gt,
                 angles: loaded.angles,
             });

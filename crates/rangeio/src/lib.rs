@@ -61,7 +61,7 @@ pub struct ReadOptions {
     /// raw 2047 (or any raw ≥ 1092) = no data. Overrides `depth_scale`.
     pub nyu_disparity_to_depth: bool,
     /// The stored values render depth inverted, nearer = brighter: the range value becomes `this − stored`
-    /// (in stored units; no data stays no data), applied after any scaling, to every format.
+    /// (in stored units; no data stays no data, and so does a result ≤ 0), applied after any scaling, to every format.
     pub inverted_depth: Option<f64>,
     /// The largest width × height accepted, checked from the header before any pixel is decoded
     /// (default [`DEFAULT_MAX_PIXELS`]).
@@ -254,8 +254,11 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Frame
         return Err(ReadError::UnknownFormat { path: path.to_path_buf() });
     };
     if let Some(offset) = opts.inverted_depth {
-        frame.range =
-            frame.range.map(|&v| if v.is_finite() { (offset - f64::from(v)) as f32 } else { f32::NAN });
+        // A value at or beyond the offset would put the point at or behind the camera: no data.
+        frame.range = frame.range.map(|&v| {
+            let d = offset - f64::from(v);
+            if v.is_finite() && d > 0.0 { d as f32 } else { f32::NAN }
+        });
         frame.units = Units::Inverted { offset };
     }
     if let Some(camera) = opts.camera {
@@ -484,6 +487,11 @@ mod tests {
         assert_eq!(f.camera, NYU_GREY.camera);
         let plain = read_bytes(pgm, path, &ReadOptions::default()).unwrap();
         assert_eq!((plain.range[(1, 0)], plain.camera), (100.0, Camera::Grid));
+        // Values at or beyond the offset (16-bit samples) would lie at or behind the camera: no data.
+        let wide = b"P5\n3 1\n65535\n\x01\x90\x01\x91\x00\x64";
+        let f = read_bytes(wide, path, &ReadOptions::default().nyu_grey()).unwrap();
+        assert!(f.range[(0, 0)].is_nan() && f.range[(1, 0)].is_nan(), "400 and 401 → no data");
+        assert_eq!(f.range[(2, 0)], 300.0);
     }
 
     #[test]

@@ -221,17 +221,24 @@ impl PyConfig {
 fn read_options(
     camera: Option<&Bound<'_, PyAny>>,
     depth_scale: Option<f64>,
+    nyu_grey: bool,
 ) -> PyResult<rangeio::ReadOptions> {
     if let Some(s) = depth_scale
         && !(s.is_finite() && s > 0.0)
     {
         return Err(PyValueError::new_err(format!("depth_scale must be a positive number, got {s}")));
     }
-    Ok(rangeio::ReadOptions {
-        depth_scale,
-        camera: camera.map(camera_from).transpose()?,
-        ..Default::default()
-    })
+    if nyu_grey && depth_scale.is_some() {
+        return Err(PyValueError::new_err("nyu_grey and depth_scale cannot be used together"));
+    }
+    let camera = camera.map(camera_from).transpose()?;
+    let opts = rangeio::ReadOptions { depth_scale, camera, ..Default::default() };
+    if !nyu_grey {
+        return Ok(opts);
+    }
+    // As the CLI's --nyu-grey: depth = 400 − grey and the Kinect intrinsics of the crop, unless a camera is given.
+    let nyu = opts.nyu_grey();
+    Ok(rangeio::ReadOptions { camera: camera.or(nyu.camera), ..nyu })
 }
 
 fn frame_to_py(py: Python<'_>, frame: rangeio::Frame) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
@@ -249,16 +256,18 @@ fn grid_to_py<T: numpy::Element>(py: Python<'_>, grid: Grid<T>) -> PyResult<Py<P
 }
 
 /// Reads a depth file of any format the CLI reads; returns `(depth, camera)` with depth as float32 (NaN = no
-/// data) in the units the CLI uses (metres for metric sensors, raw values for ABW and 8-bit images).
+/// data) in the units the CLI uses (metres for metric sensors, raw values for ABW and 8-bit images);
+/// `nyu_grey=True` reads the 8-bit NYU frames of Jin et al. as the CLI's `--nyu-grey` does.
 #[pyfunction]
-#[pyo3(signature = (path, camera = None, depth_scale = None))]
+#[pyo3(signature = (path, camera = None, depth_scale = None, nyu_grey = false))]
 fn read(
     py: Python<'_>,
     path: PathBuf,
     camera: Option<&Bound<'_, PyAny>>,
     depth_scale: Option<f64>,
+    nyu_grey: bool,
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
-    let opts = read_options(camera, depth_scale)?;
+    let opts = read_options(camera, depth_scale, nyu_grey)?;
     let frame = py.detach(|| rangeio::read(&path, &opts)).map_err(read_err)?;
     frame_to_py(py, frame)
 }
@@ -266,15 +275,16 @@ fn read(
 /// Like `read`, on the bytes of a file already in memory; `name` chooses the ABW calibration and names the
 /// file in errors.
 #[pyfunction]
-#[pyo3(signature = (data, name, camera = None, depth_scale = None))]
+#[pyo3(signature = (data, name, camera = None, depth_scale = None, nyu_grey = false))]
 fn read_bytes(
     py: Python<'_>,
     data: &[u8],
     name: PathBuf,
     camera: Option<&Bound<'_, PyAny>>,
     depth_scale: Option<f64>,
+    nyu_grey: bool,
 ) -> PyResult<(Py<PyAny>, Py<PyAny>)> {
-    let opts = read_options(camera, depth_scale)?;
+    let opts = read_options(camera, depth_scale, nyu_grey)?;
     let frame = rangeio::read_bytes(data, &name, &opts).map_err(read_err)?;
     frame_to_py(py, frame)
 }

@@ -1,0 +1,178 @@
+//! Working units: the depth scale the pipeline runs an image in, chosen from the image's own noise.
+//!
+//! The distance parameters of region growing and of the final segmentation (`max_residual`,
+//! `merge_max_residual`, `fill_max_residual`, …) and the curvature thresholds were tuned on images whose
+//! depth noise around local planes, σ from [`planefit::noise::sigma_sampled`], is 0.3–0.7 of their units
+//! (ABW in its calibration's units, the NYU grey frames, the synthetic benchmark). A Kinect frame in metres
+//! has σ = 0.001–0.02: read as it is, those parameters would let every plane of a room merge into one (a
+//! TUM frame gave 3 regions, the largest with an RMS of 34 cm).
+//!
+//! So a pinhole image is scaled so that its σ is [`PINHOLE_SIGMA`]: a uniform scale of a pinhole image is a
+//! similarity of its 3D points (planes, angles and labels keep their meaning, only distances scale), and the
+//! result no longer depends on the depth unit (metres and centimetres give the same labels up to rounding).
+//! A grid image (pixel coordinates and raw depth values) is scaled only when its σ lies outside
+//! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
+//! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
+//! stored value). docs/method.md §2.5 has the measurements.
+
+use rangeimage::{Camera, RangeImage};
+
+/// The noise σ a pinhole image is scaled to: the low end of the tuning images' 0.31–0.69 (the NYU frames do
+/// best there: docs/method.md §2.5).
+pub const PINHOLE_SIGMA: f64 = 0.25;
+/// Grid images whose σ lies within this range run in their own units; others are scaled to its nearest end.
+pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
+/// Stride of the 5 × 5 windows σ is read from (1/16 of them).
+const SAMPLE_STRIDE: usize = 4;
+
+/// How one image is run: its depth values times `factor`, seen through `camera`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorkingUnits {
+    /// What every depth value is multiplied by (1 = the image as it is).
+    pub factor: f64,
+    /// The camera of the scaled image (a pinhole's `depth_scale` folded into `factor`).
+    pub camera: Camera,
+}
+
+impl WorkingUnits {
+    /// The image as it is.
+    #[must_use]
+    pub fn identity(camera: &Camera) -> Self {
+        Self { factor: 1.0, camera: *camera }
+    }
+
+    /// Whether the image runs as it is.
+    #[must_use]
+    pub fn is_identity(&self) -> bool {
+        self.factor == 1.0
+    }
+
+    /// Writes `range` in working units into `out` (resized as needed).
+    pub fn scale_into(&self, range: &RangeImage, out: &mut RangeImage) {
+        let f = self.factor;
+        out.map_from(range, |v| (f64::from(*v) * f) as f32);
+    }
+}
+
+/// The working units of `range` seen through `camera` (see the module docs).
+///
+/// A pinhole camera's `depth_scale` is folded into the factor, so the features (computed on depth values)
+/// and the 3D points (depth values times `depth_scale`) share one unit. Without a noise estimate (fewer
+/// than 20 full windows, or noise-free depth) the image runs in its 3D units.
+#[must_use]
+pub fn working_units(range: &RangeImage, camera: &Camera) -> WorkingUnits {
+    working_units_with(range, camera, &mut Vec::new())
+}
+
+/// [`working_units`] with the noise estimate's scratch memory in `scratch` (for a stream of frames).
+pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec<f64>) -> WorkingUnits {
+    let (depth_scale, (lo, hi)) = match *camera {
+        Camera::Abw(_) => return WorkingUnits::identity(camera),
+        Camera::Pinhole { depth_scale, .. } => (depth_scale, (PINHOLE_SIGMA, PINHOLE_SIGMA)),
+        Camera::Grid => (1.0, GRID_SIGMA_BAND),
+    };
+    let sigma = planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, scratch) * depth_scale;
+    let k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
+    let camera = match *camera {
+        Camera::Pinhole { fx, fy, cx, cy, .. } => Camera::Pinhole { fx, fy, cx, cy, depth_scale: 1.0 },
+        other => other,
+    };
+    tracing::debug!(sigma, factor = k * depth_scale, "working units");
+    WorkingUnits { factor: k * depth_scale, camera }
+}
+
+/// `range` and `camera` in the working units `config` asks for (borrowed when they are the image's own):
+/// what [`crate::pipeline::Segmenter`] runs the stages on, for callers that run single stages.
+#[must_use]
+pub fn in_working_units<'a>(
+    range: &'a RangeImage,
+    camera: &Camera,
+    config: &crate::Config,
+) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
+    let units = if config.pipeline.normalize_units {
+        working_units(range, camera)
+    } else {
+        WorkingUnits::identity(camera)
+    };
+    if units.is_identity() {
+        return (std::borrow::Cow::Borrowed(range), units.camera);
+    }
+    let mut out = RangeImage::default();
+    units.scale_into(range, &mut out);
+    (std::borrow::Cow::Owned(out), units.camera)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Grid;
+
+    /// A tilted plane with a deterministic ±`amp` pattern (σ ≈ 1.06 `amp` around local planes).
+    fn plane(amp: f32) -> RangeImage {
+        Grid::from_fn(64, 48, |x, y| {
+            let wiggle = if (x * 7 + y * 13) % 5 < 2 { amp } else { -amp };
+            1.0 + 0.01 * x as f32 + 0.02 * y as f32 + wiggle
+        })
+    }
+
+    const PIN: Camera = Camera::Pinhole { fx: 500.0, fy: 500.0, cx: 32.0, cy: 24.0, depth_scale: 1.0 };
+
+    #[test]
+    fn grid_images_in_the_tuned_units_run_as_they_are_and_abw_images_always() {
+        for amp in [0.3, 0.5, 0.9] {
+            let u = working_units(&plane(amp), &Camera::Grid);
+            assert!(u.is_identity(), "amp {amp}: {u:?}");
+            assert_eq!(u.camera, Camera::Grid);
+        }
+        assert!(working_units(&plane(0.001), &Camera::ABW0).is_identity(), "ABW keeps its calibration");
+    }
+
+    /// σ of `img` in the working units `u`, and the working image.
+    fn working_sigma(img: &RangeImage, u: &WorkingUnits) -> (f64, RangeImage) {
+        let mut scaled = RangeImage::default();
+        u.scale_into(img, &mut scaled);
+        (planefit::noise::sigma_sampled(&scaled, SAMPLE_STRIDE), scaled)
+    }
+
+    #[test]
+    fn pinhole_images_get_one_noise_level_whatever_their_units() {
+        for amp in [0.0005f32, 0.002, 0.01, 0.5, 40.0] {
+            let img = plane(amp);
+            let (s, scaled) = working_sigma(&img, &working_units(&img, &PIN));
+            assert!((s / PINHOLE_SIGMA - 1.0).abs() < 1e-4, "amp {amp}: working σ {s}");
+            // The same scene in units 10 times smaller gives the same working image, up to rounding.
+            let small = img.map(|&v| v * 10.0);
+            let (_, scaled_small) = working_sigma(&small, &working_units(&small, &PIN));
+            let worst = scaled
+                .as_slice()
+                .iter()
+                .zip(scaled_small.as_slice())
+                .map(|(a, b)| (a - b).abs() / a.abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 1e-5, "amp {amp}: the two units differ by {worst} (relative)");
+        }
+    }
+
+    #[test]
+    fn grid_images_outside_the_band_go_to_its_nearest_end() {
+        for (amp, end) in [(0.002f32, GRID_SIGMA_BAND.0), (40.0, GRID_SIGMA_BAND.1)] {
+            let img = plane(amp);
+            let (s, _) = working_sigma(&img, &working_units(&img, &Camera::Grid));
+            assert!((s / end - 1.0).abs() < 1e-4, "amp {amp}: working σ {s}, expected {end}");
+        }
+    }
+
+    #[test]
+    fn a_pinhole_depth_scale_is_folded_into_the_factor() {
+        let img = plane(0.4);
+        let cam = Camera::Pinhole { fx: 500.0, fy: 500.0, cx: 32.0, cy: 24.0, depth_scale: 0.25 };
+        let u = working_units(&img, &cam);
+        let s = planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE);
+        assert!((u.factor - PINHOLE_SIGMA / s).abs() < 1e-12, "{u:?}");
+        assert_eq!(u.camera, PIN);
+        // No noise estimate (noise-free depth, or too few windows): the 3D units.
+        let flat = Grid::new(64, 48, 2.0f32);
+        assert_eq!(working_units(&flat, &cam).factor, 0.25);
+        assert!(working_units(&Grid::new(3, 3, 2.0f32), &PIN).is_identity());
+    }
+}
