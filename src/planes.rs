@@ -45,6 +45,16 @@ struct Acc {
 /// If `labels` and `range` differ in size.
 pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
     assert_eq!(range.dimensions(), labels.dimensions(), "range and labels differ in size");
+    // Compiled for the best instruction set of this CPU (bit-identical on every one).
+    isa::dispatch(
+        #[inline(always)]
+        || fit_regions(range, labels, camera),
+    )
+}
+
+/// [`planes`] once the sizes are checked.
+#[inline(always)] // into `isa::dispatch` in `planes`: compiled for each instruction set
+fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
     let ids = label_ids(labels);
     let empty = Acc {
         pixels: 0,
@@ -71,30 +81,41 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
         Some(&j) if !table.is_empty() => j as usize,
         _ => ids.binary_search(&l).expect("every label was collected"),
     };
-    let point = |x: u32, y: u32, v: f32| camera.point(f64::from(x), f64::from(y), f64::from(v));
+    // The 3D points of one row at a time (each pass recomputes them: cheaper than a frame of points in memory).
+    let mut row = vec![[0.0f64; 3]; range.width() as usize];
 
-    for_labelled(range, labels, |x, y, v, l| {
+    for_runs(range, labels, camera, &mut row, |(x0, y), vals, pts, l| {
         let a = &mut acc[index(l)];
-        a.pixels += 1;
-        a.bbox = [a.bbox[0].min(x), a.bbox[1].min(y), a.bbox[2].max(x), a.bbox[3].max(y)];
-        if let Some(p) = point(x, y, v) {
-            a.points += 1;
-            for k in 0..3 {
-                a.sum[k] += p[k];
-            }
-        }
-    });
-    let centroids: Vec<[f64; 3]> = acc.iter().map(|a| a.sum.map(|s| s / a.points as f64)).collect();
-    for_labelled(range, labels, |x, y, v, l| {
-        let j = index(l);
-        if let Some(p) = point(x, y, v) {
-            let q = sub(p, centroids[j]);
-            for r in 0..3 {
-                for c in r..3 {
-                    acc[j].cov[r][c] += q[r] * q[c];
+        let x1 = x0 + vals.len() as u32 - 1;
+        a.pixels += vals.len() as u64;
+        a.bbox = [a.bbox[0].min(x0), a.bbox[1].min(y), a.bbox[2].max(x1), a.bbox[3].max(y)];
+        // Summed in a local copy, in pixel order (the same additions as pixel by pixel into `acc`).
+        let (mut points, mut sum) = (a.points, a.sum);
+        for (v, p) in vals.iter().zip(pts) {
+            if v.is_finite() {
+                points += 1;
+                for k in 0..3 {
+                    sum[k] += p[k];
                 }
             }
         }
+        (a.points, a.sum) = (points, sum);
+    });
+    let centroids: Vec<[f64; 3]> = acc.iter().map(|a| a.sum.map(|s| s / a.points as f64)).collect();
+    for_runs(range, labels, camera, &mut row, |_, vals, pts, l| {
+        let j = index(l);
+        let mut cov = acc[j].cov;
+        for (v, &p) in vals.iter().zip(pts) {
+            if v.is_finite() {
+                let q = sub(p, centroids[j]);
+                for r in 0..3 {
+                    for c in r..3 {
+                        cov[r][c] += q[r] * q[c];
+                    }
+                }
+            }
+        }
+        acc[j].cov = cov;
     });
     let normals: Vec<[f64; 3]> = acc
         .iter()
@@ -107,12 +128,16 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
             if dot(n, camera.toward_sensor(c)) < 0.0 { n.map(|v| -v) } else { n }
         })
         .collect();
-    for_labelled(range, labels, |x, y, v, l| {
+    for_runs(range, labels, camera, &mut row, |_, vals, pts, l| {
         let j = index(l);
-        if let Some(p) = point(x, y, v) {
-            let r = dot(normals[j], sub(p, centroids[j]));
-            acc[j].sq_residual += r * r;
+        let mut sq = acc[j].sq_residual;
+        for (v, &p) in vals.iter().zip(pts) {
+            if v.is_finite() {
+                let r = dot(normals[j], sub(p, centroids[j]));
+                sq += r * r;
+            }
         }
+        acc[j].sq_residual = sq;
     });
 
     ids.iter()
@@ -130,17 +155,67 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
         .collect()
 }
 
-/// Calls `f(x, y, range value, label)` for every labelled pixel in raster order (row by row: no division of
-/// the pixel index per pixel).
+/// Calls `f((x0, y), values, points, label)` for every run of equal non-zero labels of a row, in raster order,
+/// with the run's range values and their 3D points (meaningful where the value is finite). `row` holds one row
+/// of points.
 #[inline(always)]
-fn for_labelled(range: &RangeImage, labels: &LabelImage, mut f: impl FnMut(u32, u32, f32, u32)) {
+fn for_runs(
+    range: &RangeImage,
+    labels: &LabelImage,
+    camera: &Camera,
+    row: &mut [[f64; 3]],
+    mut f: impl FnMut((u32, u32), &[f32], &[[f64; 3]], u32),
+) {
     let w = (labels.width() as usize).max(1);
     for ((rrow, lrow), y) in
         range.as_slice().chunks_exact(w).zip(labels.as_slice().chunks_exact(w)).zip(0u32..)
     {
-        for ((&v, &l), x) in rrow.iter().zip(lrow).zip(0u32..) {
+        if lrow.iter().all(|&l| l == 0) {
+            continue;
+        }
+        row_points(camera, y, rrow, row);
+        let mut x = 0;
+        while x < w {
+            let l = lrow[x];
+            let start = x;
+            x += 1;
+            while x < w && lrow[x] == l {
+                x += 1;
+            }
             if l != 0 {
-                f(x, y, v, l);
+                f((start as u32, y), &rrow[start..x], &row[start..x], l);
+            }
+        }
+    }
+}
+
+/// The 3D points of row `y` with values `vals` into `out`: [`Camera::point`]'s formulas, operation for operation
+/// (the same bits), with the camera model resolved once per row; points of non-finite values are meaningless.
+#[inline(always)]
+fn row_points(camera: &Camera, y: u32, vals: &[f32], out: &mut [[f64; 3]]) {
+    let y = f64::from(y);
+    let cols = vals.iter().zip(out.iter_mut()).zip(0u32..);
+    match *camera {
+        Camera::Abw(cal) => {
+            let f = cal.f.abs();
+            // `(255 − y) / c · d / f` groups as `((255 − y) / c · d) / f`.
+            let ty = (255.0 - y) / cal.c;
+            for ((&v, o), x) in cols {
+                let v = f64::from(v);
+                let d = v / cal.scal + cal.offset;
+                *o = [(f64::from(x) - 255.0) * d / f, ty * d / f, (255.0 - v) / cal.scal];
+            }
+        }
+        Camera::Pinhole { fx, fy, cx, cy, depth_scale } => {
+            let ty = y - cy;
+            for ((&v, o), x) in cols {
+                let z = f64::from(v) * depth_scale;
+                *o = [(f64::from(x) - cx) * z / fx, ty * z / fy, z];
+            }
+        }
+        Camera::Grid => {
+            for ((&v, o), x) in cols {
+                *o = [f64::from(x), y, f64::from(v)];
             }
         }
     }
@@ -236,6 +311,183 @@ mod tests {
             })
             .collect();
         Grid::from_vec(w, h, data).unwrap()
+    }
+
+    /// [`planes`] as it was before the run-wise passes: every pixel's point from [`Camera::point`] and added into
+    /// its label's sums one at a time (the reference the run-wise passes must equal bit for bit).
+    fn planes_pixelwise(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
+        assert_eq!(range.dimensions(), labels.dimensions(), "range and labels differ in size");
+        let ids = label_ids(labels);
+        let empty = Acc {
+            pixels: 0,
+            points: 0,
+            sum: [0.0; 3],
+            cov: [[0.0; 3]; 3],
+            sq_residual: 0.0,
+            bbox: [u32::MAX, u32::MAX, 0, 0],
+        };
+        let mut acc = vec![empty; ids.len()];
+        // Label → index into `ids`: a table when the labels are at most as many as the pixels (a segmentation's
+        // 1..n), else a binary search.
+        let max = ids.last().copied().unwrap_or(0) as usize;
+        let table: Vec<u32> = if max <= labels.len() {
+            let mut t = vec![u32::MAX; max + 1];
+            for (j, &l) in ids.iter().enumerate() {
+                t[l as usize] = j as u32;
+            }
+            t
+        } else {
+            Vec::new()
+        };
+        let index = |l: u32| match table.get(l as usize) {
+            Some(&j) if !table.is_empty() => j as usize,
+            _ => ids.binary_search(&l).expect("every label was collected"),
+        };
+        let point = |x: u32, y: u32, v: f32| camera.point(f64::from(x), f64::from(y), f64::from(v));
+
+        for_labelled_pixelwise(range, labels, |x, y, v, l| {
+            let a = &mut acc[index(l)];
+            a.pixels += 1;
+            a.bbox = [a.bbox[0].min(x), a.bbox[1].min(y), a.bbox[2].max(x), a.bbox[3].max(y)];
+            if let Some(p) = point(x, y, v) {
+                a.points += 1;
+                for k in 0..3 {
+                    a.sum[k] += p[k];
+                }
+            }
+        });
+        let centroids: Vec<[f64; 3]> = acc.iter().map(|a| a.sum.map(|s| s / a.points as f64)).collect();
+        for_labelled_pixelwise(range, labels, |x, y, v, l| {
+            let j = index(l);
+            if let Some(p) = point(x, y, v) {
+                let q = sub(p, centroids[j]);
+                for r in 0..3 {
+                    for c in r..3 {
+                        acc[j].cov[r][c] += q[r] * q[c];
+                    }
+                }
+            }
+        });
+        let normals: Vec<[f64; 3]> = acc
+            .iter()
+            .zip(&centroids)
+            .map(|(a, &c)| {
+                if a.points < 3 {
+                    return [f64::NAN; 3];
+                }
+                let n = smallest_eigenvector(a.cov);
+                if dot(n, camera.toward_sensor(c)) < 0.0 { n.map(|v| -v) } else { n }
+            })
+            .collect();
+        for_labelled_pixelwise(range, labels, |x, y, v, l| {
+            let j = index(l);
+            if let Some(p) = point(x, y, v) {
+                let r = dot(normals[j], sub(p, centroids[j]));
+                acc[j].sq_residual += r * r;
+            }
+        });
+
+        ids.iter()
+            .zip(acc)
+            .zip(centroids.iter().zip(&normals))
+            .map(|((&label, a), (&centroid, &normal))| Plane {
+                label,
+                normal,
+                d: dot(normal, centroid),
+                centroid,
+                pixels: a.pixels,
+                rms: (a.sq_residual / a.points as f64).sqrt(),
+                bbox: a.bbox,
+            })
+            .collect()
+    }
+
+    /// Calls `f(x, y, range value, label)` for every labelled pixel in raster order.
+    #[inline(always)]
+    fn for_labelled_pixelwise(
+        range: &RangeImage,
+        labels: &LabelImage,
+        mut f: impl FnMut(u32, u32, f32, u32),
+    ) {
+        let w = (labels.width() as usize).max(1);
+        for ((rrow, lrow), y) in
+            range.as_slice().chunks_exact(w).zip(labels.as_slice().chunks_exact(w)).zip(0u32..)
+        {
+            for ((&v, &l), x) in rrow.iter().zip(lrow).zip(0u32..) {
+                if l != 0 {
+                    f(x, y, v, l);
+                }
+            }
+        }
+    }
+
+    /// Random label images (runs, holes, labels beyond the pixel count) on random depths with NaN and infinite
+    /// values, on the three camera models, on every instruction-set path: the same planes as the pixel-wise
+    /// passes, bit for bit.
+    #[test]
+    fn run_wise_passes_equal_the_pixel_wise_ones() {
+        // A seeded xorshift64*: deterministic and dependency-free.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            state.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        };
+        let cams = [
+            Camera::ABW0,
+            Camera::ABW1,
+            Camera::Pinhole { fx: 525.0, fy: 520.5, cx: 319.5, cy: 239.5, depth_scale: 0.001 },
+            Camera::Grid,
+        ];
+        let bits = |p: &Plane| {
+            let f = [p.normal, p.centroid].concat().into_iter().chain([p.d, p.rms]).map(f64::to_bits);
+            (p.label, p.pixels, p.bbox, f.collect::<Vec<_>>())
+        };
+        let mut compared = 0;
+        for round in 0..48 {
+            let (w, h) = (1 + (next() % 70) as u32, 1 + (next() % 50) as u32);
+            let n_labels = 1 + next() % 12;
+            let big = round % 4 == 3;
+            let (mut vals, mut labs) = (Vec::new(), Vec::new());
+            while labs.len() < (w * h) as usize {
+                // Runs of one label, some of them 0; beyond the pixel count in some rounds (the binary search).
+                let k = next() % (n_labels + 1);
+                let l = if k == 0 {
+                    0
+                } else if big {
+                    1_000_000 + k as u32 * 7919
+                } else {
+                    k as u32
+                };
+                for _ in 0..1 + next() % 9 {
+                    labs.push(l);
+                }
+            }
+            labs.truncate((w * h) as usize);
+            for i in 0..w * h {
+                let r = next();
+                vals.push(match r % 23 {
+                    0 => f32::NAN,
+                    1 => f32::INFINITY,
+                    _ => {
+                        20.0 + (i % w) as f32 * 0.37
+                            + (i / w) as f32 * 0.11
+                            + (r >> 40) as f32 / 16_777_216.0 * 90.0
+                    }
+                });
+            }
+            let range = Grid::from_vec(w, h, vals).unwrap();
+            let labels = Grid::from_vec(w, h, labs).unwrap();
+            let cam = cams[round % cams.len()];
+            let b: Vec<_> = planes_pixelwise(&range, &labels, &cam).iter().map(bits).collect();
+            for path in isa::Isa::available() {
+                let a = isa::with_isa(path, || planes(&range, &labels, &cam)).expect("available");
+                assert_eq!(a.iter().map(bits).collect::<Vec<_>>(), b, "round {round}, {}", path.name());
+                compared += a.iter().filter(|p| p.normal[0].is_finite()).count();
+            }
+        }
+        assert!(compared > 100, "{compared} planes compared");
     }
 
     #[test]

@@ -488,22 +488,28 @@ pub(crate) fn run(
     let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
+    // Whether `mbufs.stats` are the statistics of the current labels (as `region_stats_into` gives them): a merge
+    // that merges nothing leaves them so, until the labels change.
+    let mut fresh = merged.n_merged == 0;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
     let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
     info.n_dropped = n_dropped;
+    fresh &= n_dropped == 0;
     if params.fill_unlabelled {
         info.n_filled_px = fill(&ctx, params, (&mbufs.stats, &used), labels, queue, fill_planes);
+        fresh &= info.n_filled_px == 0;
         if params.merge_after_fill && info.n_filled_px > 0 {
             // Regions that a band of non-growable pixels kept apart touch now: merge again.
             let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
+            fresh = again.n_merged == 0;
         }
     }
 
     (info.n_regions, info.n_unlabelled_valid_px) =
-        relabel_into(&ctx, range, labels, next, &mut mbufs.stats, out_seg);
+        relabel_into(&ctx, range, labels, (next, fresh), &mut mbufs.stats, out_seg);
     borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
     tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
     info
@@ -649,19 +655,31 @@ fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32)
     (used, n_dropped)
 }
 
-/// Final statistics under the current labels (labels below `next`), then the labels relabelled 1..n in raster
-/// order of first pixel while copied out of the padded grid into `out_seg.labels` (one pass), and the region
-/// records. Returns the number of regions and of valid pixels left unlabelled.
+/// Final statistics under the current labels (labels below `next`; kept when `fresh` says `stats` already hold
+/// them), then the labels relabelled 1..n in raster order of first pixel while copied out of the padded grid into
+/// `out_seg.labels` (one pass), and the region records. Returns the number of regions and of valid pixels left
+/// unlabelled.
 fn relabel_into(
     ctx: &Ctx<'_>,
     range: &RangeImage,
     labels: &[u32],
-    next: u32,
+    (next, fresh): (u32, bool),
     stats: &mut Vec<Stats>,
     out_seg: &mut Segmentation,
 ) -> (u32, u32) {
     let (w, h) = (ctx.w, ctx.h);
-    region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats);
+    if !fresh {
+        region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats);
+    }
+    #[cfg(test)]
+    {
+        // The kept statistics equal recomputed ones, bit for bit (checked by every test of the crate; not in the
+        // other crates' tests, where this allocation would count against the per-frame allocation test).
+        let mut again = Vec::new();
+        region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut again);
+        let key = |s: &Stats| (s.count, s.n_k, s.first, s.sum_k.to_bits(), s.mom);
+        assert!(stats.iter().map(key).eq(again.iter().map(key)), "kept statistics differ (fresh: {fresh})");
+    }
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);
     let mut map = vec![0u32; stats.len()];

@@ -196,8 +196,16 @@ pub(crate) struct MergeBufs {
     planes: Vec<Option<Plane>>,
     parent: Vec<u32>,
     pairs: Vec<(u32, u32)>,
+    /// The adjacent pairs of roots, each with its score when known from an earlier pass (see [`merge`]).
+    graph: Vec<((u32, u32), Known)>,
+    /// Per label: its statistics changed (a region merged into it) during the current pass.
+    changed: Vec<bool>,
     cand: Vec<(f64, u32, u32, u32, u32)>,
 }
+
+/// A cached [`Criterion::score`]: `None` until computed, then the score (itself `None` for a pair that may
+/// not merge).
+type Known = Option<Option<f64>>;
 
 impl MergeBufs {
     /// Room for labels `0..n` in every per-label vector (emptied), so a later frame with more regions does
@@ -209,6 +217,8 @@ impl MergeBufs {
         self.planes.reserve(n);
         self.parent.clear();
         self.parent.reserve(n);
+        self.changed.clear();
+        self.changed.reserve(n);
     }
 }
 
@@ -226,6 +236,11 @@ pub(crate) struct Merged {
 /// Candidate pairs are processed in order of (score, first pixel of either region); the surviving
 /// label of a union is the one whose region starts first in raster order. Nothing depends on the
 /// numeric label values, so a relabelled input yields the same partition.
+///
+/// A score is a function of the two regions' statistics and planes alone, so it is computed once per pair
+/// and pass at most: a pair whose two regions took part in no merge keeps the score of the previous pass,
+/// and the re-check before a merge is skipped when neither region has changed since the pass scored it
+/// (the same decisions as scoring every pair every time, at a fraction of the plane fits).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn merge<const N: usize>(
     labels: &mut [u32],
@@ -238,7 +253,7 @@ pub(crate) fn merge<const N: usize>(
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
     bufs: &mut MergeBufs,
 ) -> Merged {
-    let MergeBufs { stats, planes, parent, pairs, cand } = bufs;
+    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand } = bufs;
     region_stats_into(labels, max_label, pts, k, stats);
     let crit = Criterion::new(params);
     let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
@@ -246,21 +261,27 @@ pub(crate) fn merge<const N: usize>(
     planes.extend(stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }));
     parent.clear();
     parent.extend(0..=max_label);
+    changed.clear();
+    changed.resize(max_label as usize + 1, false);
     adjacent_pairs_into(labels, width, eight, pairs);
+    graph.clear();
+    graph.extend(pairs.iter().map(|&p| (p, None)));
 
     let mut n_merged = 0;
     let mut n_passes = 0;
     loop {
         n_passes += 1;
         cand.clear();
-        for &(a, b) in pairs.iter() {
-            let (ra, rb) = (find(parent, a), find(parent, b));
-            if ra == rb {
-                continue;
-            }
-            let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
-            if let Some(s) = crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref()) {
-                let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
+        // At the start of a pass every pair holds two distinct roots (the first pass: every label is one).
+        for ((a, b), known) in graph.iter_mut() {
+            let (a, b) = (*a, *b);
+            debug_assert!(a != b && parent[a as usize] == a && parent[b as usize] == b);
+            let (sa, sb) = (&stats[a as usize], &stats[b as usize]);
+            let score = *known.get_or_insert_with(|| {
+                crit.score(sa, planes[a as usize].as_ref(), sb, planes[b as usize].as_ref())
+            });
+            if let Some(s) = score {
+                let (lo, hi) = if sa.first < sb.first { (a, b) } else { (b, a) };
                 cand.push((s, stats[lo as usize].first, stats[hi as usize].first, lo, hi));
             }
         }
@@ -269,14 +290,18 @@ pub(crate) fn merge<const N: usize>(
         }
         cand.sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
         cand.dedup_by(|p, q| p.1 == q.1 && p.2 == q.2);
-        let mut changed = false;
+        let mut merged_now = false;
         for &(_, _, _, a, b) in cand.iter() {
             let (ra, rb) = (find(parent, a), find(parent, b));
             if ra == rb {
                 continue;
             }
+            // Both still the regions this pass scored (roots, unchanged): the score is the one found above.
+            let same = ra == a && rb == b && !changed[a as usize] && !changed[b as usize];
             let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
-            if crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref()).is_none() {
+            if !same
+                && crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref()).is_none()
+            {
                 continue;
             }
             let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
@@ -284,26 +309,35 @@ pub(crate) fn merge<const N: usize>(
             stats[lo as usize] = u;
             planes[lo as usize] = fit(&u);
             parent[hi as usize] = lo;
+            changed[lo as usize] = true;
             n_merged += 1;
-            changed = true;
+            merged_now = true;
         }
-        if !changed {
+        if !merged_now {
             break;
         }
-        // Shrink the graph to root pairs for the next pass.
-        for p in pairs.iter_mut() {
+        // Shrink the graph to root pairs for the next pass; a pair keeps its score when both its regions are
+        // unchanged roots (a pair that maps onto another one always has a changed region, so duplicates
+        // carry no score).
+        for (p, known) in graph.iter_mut() {
             let (ra, rb) = (find(parent, p.0), find(parent, p.1));
+            if ra != p.0 || rb != p.1 || changed[ra as usize] || changed[rb as usize] {
+                *known = None;
+            }
             *p = (ra.min(rb), ra.max(rb));
         }
-        pairs.retain(|p| p.0 != p.1);
-        pairs.sort_unstable();
-        pairs.dedup();
+        graph.retain(|(p, _)| p.0 != p.1);
+        graph.sort_unstable_by_key(|e| e.0);
+        graph.dedup_by_key(|e| e.0);
+        changed.fill(false);
     }
     if n_merged > 0 {
+        // Every label's root once, then one table look-up per pixel (label 0 is its own root).
+        for l in 0..=max_label {
+            parent[l as usize] = find(parent, l);
+        }
         for l in labels.iter_mut() {
-            if *l != 0 {
-                *l = find(parent, *l);
-            }
+            *l = parent[*l as usize];
         }
     }
     Merged { n_merged, n_passes }
@@ -432,6 +466,150 @@ mod tests {
                 base.iter().map(|&l| if l == 0 { 0 } else { perm[l as usize - 1] }).collect();
             assert_eq!(run(&shuffled).0, reference);
         }
+    }
+
+    /// The merge loop as it was before scores were kept between passes: every pair scored in every pass and
+    /// re-checked before each union (the reference of [`merge`]).
+    #[allow(clippy::too_many_arguments)]
+    fn merge_rescoring_every_pair<const N: usize>(
+        labels: &mut [u32],
+        max_label: u32,
+        width: usize,
+        eight: bool,
+        pts: &[[f32; N]],
+        k: &[f32],
+        params: &Params,
+        toward: &dyn Fn([f64; 3]) -> [f64; 3],
+    ) -> (Vec<Stats>, u32, u32) {
+        let mut stats = region_stats(labels, max_label, pts, k);
+        let crit = Criterion::new(params);
+        let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
+        let mut planes: Vec<_> = stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }).collect();
+        let mut parent: Vec<u32> = (0..=max_label).collect();
+        let mut pairs = Vec::new();
+        adjacent_pairs_into(labels, width, eight, &mut pairs);
+        let (mut n_merged, mut n_passes) = (0, 0);
+        loop {
+            n_passes += 1;
+            let mut cand = Vec::new();
+            for &(a, b) in &pairs {
+                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                if ra == rb {
+                    continue;
+                }
+                let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
+                if let Some(s) =
+                    crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref())
+                {
+                    let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
+                    cand.push((s, stats[lo as usize].first, stats[hi as usize].first, lo, hi));
+                }
+            }
+            if cand.is_empty() {
+                break;
+            }
+            cand.sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
+            cand.dedup_by(|p, q| p.1 == q.1 && p.2 == q.2);
+            let mut changed = false;
+            for &(_, _, _, a, b) in &cand {
+                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                if ra == rb {
+                    continue;
+                }
+                let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
+                if crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref()).is_none() {
+                    continue;
+                }
+                let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
+                let u = stats[lo as usize].combined(&stats[hi as usize]);
+                stats[lo as usize] = u;
+                planes[lo as usize] = fit(&u);
+                parent[hi as usize] = lo;
+                n_merged += 1;
+                changed = true;
+            }
+            if !changed {
+                break;
+            }
+            for p in pairs.iter_mut() {
+                let (ra, rb) = (find(&mut parent, p.0), find(&mut parent, p.1));
+                *p = (ra.min(rb), ra.max(rb));
+            }
+            pairs.retain(|p| p.0 != p.1);
+            pairs.sort_unstable();
+            pairs.dedup();
+        }
+        for l in labels.iter_mut() {
+            if *l != 0 {
+                *l = find(&mut parent, *l);
+            }
+        }
+        (stats, n_merged, n_passes)
+    }
+
+    /// Random fragmentations of noisy scenes, every mode and merge rule, one `MergeBufs` for all: the same
+    /// labels, counts, passes and statistics (bit for bit) as scoring every pair in every pass.
+    #[test]
+    fn kept_scores_give_the_same_merges_as_rescoring() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(18);
+        let mut bufs = MergeBufs::default();
+        let variants = [
+            Params::default(),
+            Params::paper(),
+            Params { merge_joint_rms_ratio: 0.0, ..Params::default() },
+            Params { merge_max_angle_deg: 40.0, merge_max_residual: 20.0, t_m: 0.05, ..Params::default() },
+            Params { merge_joint_rms_ratio: 3.0, merge_max_residual: 8.0, ..Params::default() },
+        ];
+        let mut total_merges = 0;
+        for round in 0..40 {
+            let s = if round % 2 == 0 { box_scene() } else { crate::testutil::abw_like_scene(48) };
+            let (w, h) = s.range.dimensions();
+            // Depth noise on the points, so regions fit their planes only approximately.
+            let pts: Vec<[f32; 3]> = s
+                .range
+                .enumerate()
+                .map(|(x, y, &v)| [x as f32, y as f32, v + rng.random_range(-0.6f32..0.6)])
+                .collect();
+            let valid: Vec<bool> = s.range.as_slice().iter().map(|v| v.is_finite()).collect();
+            // Blocks of random sizes, some pixels unlabelled, labels shuffled.
+            let (bw, bh) = (rng.random_range(1..7u32), rng.random_range(1..7u32));
+            let nbx = w.div_ceil(bw);
+            let max = nbx * h.div_ceil(bh);
+            let mut perm: Vec<u32> = (1..=max).collect();
+            for i in (1..perm.len()).rev() {
+                perm.swap(i, rng.random_range(0..=i));
+            }
+            let labels: Vec<u32> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    if !valid[i as usize] || rng.random_range(0..50u32) == 0 {
+                        0
+                    } else {
+                        perm[((y / bh) * nbx + x / bw) as usize]
+                    }
+                })
+                .collect();
+            let params = &variants[round % variants.len()];
+            let eight = round % 3 == 0;
+            let toward = |_p: [f64; 3]| [0.0, 0.0, -1.0];
+            let k = s.features.k.as_slice();
+            let mut l0 = labels.clone();
+            let (st0, m0, p0) =
+                merge_rescoring_every_pair(&mut l0, max, w as usize, eight, &pts, k, params, &toward);
+            let mut l1 = labels;
+            let m = merge(&mut l1, max, w as usize, eight, &pts, k, params, &toward, &mut bufs);
+            assert_eq!((l1.as_slice(), m.n_merged, m.n_passes), (l0.as_slice(), m0, p0), "round {round}");
+            for l in (1..=max as usize).filter(|&l| l0.contains(&(l as u32))) {
+                let (a, b) = (&bufs.stats[l], &st0[l]);
+                assert_eq!(
+                    (a.count, a.n_k, a.first, a.sum_k.to_bits()),
+                    (b.count, b.n_k, b.first, b.sum_k.to_bits())
+                );
+                assert_eq!(a.mom, b.mom);
+            }
+            total_merges += m0;
+        }
+        assert!(total_merges > 1000, "{total_merges} merges");
     }
 
     #[test]
