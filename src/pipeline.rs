@@ -131,11 +131,7 @@ impl Segmenter {
         let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
         let Self { config, out, scratch } = self;
         let t = Instant::now();
-        let units = if config.pipeline.normalize_units {
-            crate::units::working_units_with(range, camera, &mut scratch.noise)
-        } else {
-            WorkingUnits::identity(camera)
-        };
+        let units = crate::units::for_config(range, camera, config, &mut scratch.noise);
         let mut work = std::mem::take(&mut scratch.work);
         let range = if units.is_identity() {
             range

@@ -81,6 +81,21 @@ pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec
     WorkingUnits { factor: k * depth_scale, camera }
 }
 
+/// The working units `config` asks for: [`working_units_with`] when `pipeline.normalize_units` is on, else the
+/// image's own.
+pub fn for_config(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &crate::Config,
+    scratch: &mut Vec<f64>,
+) -> WorkingUnits {
+    if config.pipeline.normalize_units {
+        working_units_with(range, camera, scratch)
+    } else {
+        WorkingUnits::identity(camera)
+    }
+}
+
 /// `range` and `camera` in the working units `config` asks for (borrowed when they are the image's own):
 /// what [`crate::pipeline::Segmenter`] runs the stages on, for callers that run single stages.
 #[must_use]
@@ -89,11 +104,7 @@ pub fn in_working_units<'a>(
     camera: &Camera,
     config: &crate::Config,
 ) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
-    let units = if config.pipeline.normalize_units {
-        working_units(range, camera)
-    } else {
-        WorkingUnits::identity(camera)
-    };
+    let units = for_config(range, camera, config, &mut Vec::new());
     if units.is_identity() {
         return (std::borrow::Cow::Borrowed(range), units.camera);
     }
