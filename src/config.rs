@@ -129,6 +129,7 @@ impl Config {
         // The specification fills every left-over pixel.
         c.segment.fill_max_residual = 0.0;
         c.segment.refine_passes = 0;
+        c.segment.bend_max_angle_deg = 0.0;
         c
     }
 
@@ -437,6 +438,14 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.refine_passes",
         "Passes moving border pixels to the adjacent region whose plane fits them better (0 = off).",
+    ),
+    (
+        "segment.bend_max_angle_deg",
+        "Regions mode: adjacent regions meeting along their border (a bend, not a step) merge if their normals differ ≤ this (0 = off).",
+    ),
+    (
+        "segment.bend_max_gap",
+        "Regions mode: a bend needs the border pixels' mean distance to the other region's plane < this × the larger region RMS.",
     ),
 ];
 

@@ -44,6 +44,11 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    support, if their planes agree as above and, for a supported border, each piece's RMS
 ///    distance to the other's plane is at most `within_max_rms_ratio` times its own RMS: edges
 ///    inside a face split it only where the geometry changes.
+///    With `bend_max_angle_deg` > 0, two adjacent regions whose border pixels lie, on average,
+///    closer to each other's plane than `bend_max_gap` times the larger of their RMS residuals
+///    (the planes meet at the border: a bend, not a step) merge whatever the support, if their
+///    normals differ by at most `bend_max_angle_deg` and one plane fits both within
+///    `merge_max_residual` (RMS): one wall that the depth encoding bends.
 /// 5. Border refinement (`refine_passes` > 0): a border pixel farther than 2.5 noise scales
 ///    from its own region's plane moves to the adjacent region whose plane fits it better (a
 ///    Potts energy, so noise does not fray the border; within the fill limit), up to
@@ -702,6 +707,26 @@ mod tests {
     }
 
     #[test]
+    fn regions_mode_merges_across_a_bend_but_not_across_a_step() {
+        // Two region-growing regions with an edge line on their border: a noisy surface whose slope
+        // changes from 0.5 to 0.6 per pixel at x = 20 (a bend of 4.4°, continuous), and the same
+        // surface with a step of about three times its noise.
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.25 - 0.5;
+        let bent = |x: u32| if x < 20 { 100.0 + 0.5 * x as f32 } else { 110.0 + 0.6 * (x as f32 - 20.0) };
+        let count = |step: f32, sp: &Params| {
+            let range = Grid::from_fn(40, 30, |x, y| bent(x) + noise(x, y) + if x < 20 { 0.0 } else { step });
+            segment(&range, &Camera::Grid, &edges, Some(&rg_split(&range)), sp).1.len()
+        };
+        let off = Params { bend_max_angle_deg: 0.0, ..regions_mode() };
+        assert_eq!(count(0.0, &off), 2, "without bend merges the supported border stays");
+        assert_eq!(count(0.0, &regions_mode()), 1, "a bend: merged");
+        assert_eq!(count(1.0, &regions_mode()), 2, "a step: kept");
+        let narrow = Params { bend_max_angle_deg: 3.0, ..regions_mode() };
+        assert_eq!(count(0.0, &narrow), 2, "a bend sharper than bend_max_angle_deg: kept");
+    }
+
+    #[test]
     fn segment_params_default_validates_and_round_trips() {
         let p = Params::default();
         assert_eq!(p.validate(), Ok(()));
@@ -715,7 +740,9 @@ mod tests {
         assert!(Params { min_border_support: 1.5, ..p.clone() }.validate().is_err());
         assert!(Params { within_max_rms_ratio: 0.5, ..p.clone() }.validate().is_err());
         assert!(Params { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
-        assert!(Params { merge_max_residual: f64::NAN, ..p }.validate().is_err());
+        assert!(Params { merge_max_residual: f64::NAN, ..p.clone() }.validate().is_err());
+        assert!(Params { bend_max_angle_deg: 91.0, ..p.clone() }.validate().is_err());
+        assert!(Params { bend_max_gap: -1.0, ..p }.validate().is_err());
     }
 
     /// A random scene: tilted planes in vertical bands with noise and NaN holes, random edge pixels plus

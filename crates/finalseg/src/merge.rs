@@ -8,16 +8,35 @@ use rangeimage::EdgeMap;
 use rangeimage::union_find::find;
 use std::collections::BTreeMap;
 
-/// Per adjacent pair of components (smaller label, larger label): (border pixel count, count of
-/// those within 1 px of an edge pixel), over 4-adjacencies.
-type Borders = BTreeMap<(u32, u32), (u32, u32)>;
+/// The border between two adjacent components, over 4-adjacencies.
+#[derive(Debug, Clone, Copy, Default)]
+struct Border {
+    /// Border pixels (each 4-adjacency counts its two pixels).
+    n: u32,
+    /// Those within 1 px of an edge pixel.
+    near: u32,
+    /// The sum of their distances to the other component's plane.
+    gap: f64,
+}
 
-/// The merge candidates: adjacent pairs in sorted order, and whether each one's border is weakly
-/// supported (else it is a supported border inside one region-growing region).
+/// Per adjacent pair of components (smaller label, larger label): their border.
+type Borders = BTreeMap<(u32, u32), Border>;
+
+/// How a candidate pair may merge.
+#[derive(Debug, Clone, Copy)]
+struct Kind {
+    /// The plane test of [`PlaneTest::agree`] applies: the border is weakly supported (`Some(true)`)
+    /// or lies inside one region-growing region (`Some(false)`); `None`: neither.
+    agree: Option<bool>,
+    /// The border is continuous (a bend candidate, [`PlaneTest::bend`]).
+    bend: bool,
+}
+
+/// The merge candidates: adjacent pairs in sorted order, and how each one may merge.
 #[derive(Debug, Default)]
 struct Candidates {
     pairs: Vec<(u32, u32)>,
-    weak: Vec<bool>,
+    kinds: Vec<Kind>,
 }
 
 /// The plane agreement a merge needs, from [`Params`].
@@ -28,6 +47,8 @@ struct PlaneTest {
     r2: f64,
     /// `within_max_rms_ratio²`.
     k2: f64,
+    /// cos of `bend_max_angle_deg`, or `None` (bend merges off).
+    cos_bend: Option<f64>,
 }
 
 /// Union-find merging of adjacent components of `pieces` over borders weakly supported by
@@ -44,12 +65,14 @@ pub(crate) fn merge_unsupported(
 ) {
     let Buffers { hor, near, candidates } = bufs;
     near_edges(edges, scene.w, scene.h, hor, near);
-    let borders = borders(&pieces.comp, near, scene.w, scene.h);
-    candidates_into(&borders, &pieces.guide, params, candidates);
+    let bends = params.bend_max_angle_deg > 0.0;
+    let borders = borders(scene, &pieces.comp, near, bends.then_some(&pieces.planes[..]));
+    candidates_into(&borders, (&pieces.guide, &pieces.planes), params, candidates);
     let test = PlaneTest {
         cos_max: params.merge_max_angle_deg.to_radians().cos(),
         r2: params.merge_max_residual * params.merge_max_residual,
         k2: params.within_max_rms_ratio * params.within_max_rms_ratio,
+        cos_bend: bends.then(|| params.bend_max_angle_deg.to_radians().cos()),
     };
     let merges = merge_fixpoint(candidates, &test, parent, &mut pieces.moments, &mut pieces.planes, scene);
     tracing::debug!(pairs = borders.len(), candidates = candidates.pairs.len(), merges, "merged");
@@ -87,15 +110,24 @@ fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &m
     }
 }
 
-/// The borders between adjacent components of `comp`, with their support by `near`.
-fn borders(comp: &[u32], near: &[bool], w: usize, h: usize) -> Borders {
+/// The borders between adjacent components of `comp`, with their support by `near` and, given the
+/// components' `planes` (`planes[l − 1]` for label `l`), their gaps.
+fn borders(scene: &Scene<'_>, comp: &[u32], near: &[bool], planes: Option<&[Plane]>) -> Borders {
+    let (w, h) = (scene.w, scene.h);
     let mut pairs = Borders::new();
+    // Distance of pixel i's 3D point to the plane of label l.
+    let gap = |i: usize, l: u32, planes: &[Plane]| {
+        scene.point(i % w, i / w).map_or(0.0, |p| planes[l as usize - 1].residual(p))
+    };
     let mut add = |i: usize, j: usize| {
         let (a, b) = (comp[i], comp[j]);
         if a != 0 && b != 0 && a != b {
-            let entry = pairs.entry((a.min(b), a.max(b))).or_insert((0, 0));
-            entry.0 += 2;
-            entry.1 += u32::from(near[i]) + u32::from(near[j]);
+            let entry = pairs.entry((a.min(b), a.max(b))).or_default();
+            entry.n += 2;
+            entry.near += u32::from(near[i]) + u32::from(near[j]);
+            if let Some(planes) = planes {
+                entry.gap += gap(i, b, planes) + gap(j, a, planes);
+            }
         }
     };
     for y in 0..h {
@@ -119,20 +151,30 @@ fn borders(comp: &[u32], near: &[bool], w: usize, h: usize) -> Borders {
 /// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
 /// pieces of one region-growing region (`comp_guide[l − 1]` is the region-growing label of `l`).
 /// Into `out`, whose memory is reused.
-fn candidates_into(borders: &Borders, comp_guide: &[u32], params: &Params, out: &mut Candidates) {
-    let Candidates { pairs, weak } = out;
+/// With `bend_max_angle_deg` > 0, also any border whose mean gap is below `bend_max_gap` times the larger RMS
+/// residual of the two components (`planes[l − 1]` is the plane of `l`).
+fn candidates_into(
+    borders: &Borders,
+    (comp_guide, planes): (&[u32], &[Plane]),
+    params: &Params,
+    out: &mut Candidates,
+) {
+    let Candidates { pairs, kinds } = out;
     pairs.clear();
-    weak.clear();
-    for (pair, w) in borders.iter().filter_map(|(&(a, b), &(n, s))| {
-        let weak = f64::from(s) < params.min_border_support * f64::from(n);
+    kinds.clear();
+    for (&(a, b), border) in borders {
+        let n = f64::from(border.n);
+        let weak = f64::from(border.near) < params.min_border_support * n;
         let same_region = params.merge_within_region && {
             let g = comp_guide[a as usize - 1];
             g != 0 && g == comp_guide[b as usize - 1]
         };
-        (weak || same_region).then_some(((a, b), weak))
-    }) {
-        pairs.push(pair);
-        weak.push(w);
+        let scatter = planes[a as usize - 1].rms.max(planes[b as usize - 1].rms);
+        let bend = params.bend_max_angle_deg > 0.0 && border.gap < params.bend_max_gap * scatter * n;
+        if weak || same_region || bend {
+            pairs.push((a, b));
+            kinds.push(Kind { agree: (weak || same_region).then_some(weak), bend });
+        }
     }
 }
 
@@ -156,7 +198,10 @@ fn merge_fixpoint(
             }
             let (ia, ib) = (ra as usize - 1, rb as usize - 1);
             let (pa, pb) = (planes[ia], planes[ib]);
-            if !test.agree(&pa, &pb, &moments[ia], &moments[ib], candidates.weak[k]) {
+            let kind = candidates.kinds[k];
+            let agree = kind.agree.is_some_and(|weak| test.agree(&pa, &pb, &moments[ia], &moments[ib], weak));
+            let bend = || kind.bend && test.bend(&pa, &pb, &moments[ia], &moments[ib], scene);
+            if !(agree || bend()) {
                 continue;
             }
             let (root, other) = (ra.min(rb), ra.max(rb));
@@ -186,5 +231,19 @@ impl PlaneTest {
         // one plane within their own noise. (+1e-12: noise-free pieces of one plane have RMS 0 and
         // rounding-level residuals.)
         weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12)
+    }
+
+    /// Whether groups a and b, whose border is continuous, may merge as two sides of a bend:
+    /// normals within `bend_max_angle_deg`, and one plane through both within `merge_max_residual`.
+    fn bend(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, scene: &Scene<'_>) -> bool {
+        let Some(cos_bend) = self.cos_bend else { return false };
+        let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
+        if dot.abs() < cos_bend {
+            return false;
+        }
+        let mut joint = *ma;
+        joint.merge(mb);
+        let rms = fit_plane(&joint, scene.camera).rms;
+        rms * rms <= self.r2
     }
 }

@@ -68,6 +68,17 @@ pub struct Params {
     /// neighbour; within the fill limit). A border moves at most one pixel per pass; 0 = off
     /// (borders stay where growth and edges put them, the specification taken literally).
     pub refine_passes: u32,
+    /// `regions` mode: two adjacent regions whose planes meet along their border (a bend of one
+    /// surface, not a step: the mean distance of the border pixels to the other region's plane is
+    /// below `bend_max_gap` times the regions' scatter) merge, whatever the edges, if their normals differ by at most this
+    /// and one plane fits both within `merge_max_residual` (RMS). A wall that the depth encoding
+    /// bends (8-bit inverse depth) is split by region growing into pieces that fail the plane
+    /// tests above; 0 = off.
+    pub bend_max_angle_deg: f64,
+    /// `regions` mode, `bend_max_angle_deg` > 0: a bend merge needs the mean distance of the border
+    /// pixels of two regions to each other's plane below this multiple of the larger of the two
+    /// regions' RMS distances to their own planes (their scatter: noise, quantisation, bending).
+    pub bend_max_gap: f64,
 }
 
 impl Default for Params {
@@ -85,6 +96,8 @@ impl Default for Params {
             fill_max_residual: 2.0,
             fill_rms_ratio: 2.0,
             refine_passes: 10,
+            bend_max_angle_deg: 30.0,
+            bend_max_gap: 1.5,
         }
     }
 }
@@ -102,6 +115,8 @@ impl Params {
         ParamError::at_least("segment.fill_max_residual", self.fill_max_residual, 0.0)?;
         ParamError::at_least("segment.fill_rms_ratio", self.fill_rms_ratio, 0.0)?;
         ParamError::at_least("segment.merge_max_residual", self.merge_max_residual, 0.0)?;
+        ParamError::in_range("segment.bend_max_angle_deg", self.bend_max_angle_deg, 0.0, 90.0)?;
+        ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
         Ok(())
     }
 }
