@@ -694,7 +694,7 @@ mod tests {
         assert_eq!(count(&plane_img, &regions_mode()), 1, "one plane: the pieces rejoin");
         let split = Params { merge_within_region: false, ..regions_mode() };
         assert_eq!(count(&plane_img, &split), 2, "without merge_within_region the edges split it");
-        // Parallel planes one unit apart (within merge_max_residual = 2, far above their RMS of
+        // Parallel planes one unit apart (within merge_max_residual = 3, far above their RMS of
         // 0): a real step, kept.
         let step = image(&|x, y| plane(x, y) + if x < 20 { 0.0 } else { 1.0 });
         assert_eq!(count(&step, &regions_mode()), 2, "a step between parallel pieces stays");

@@ -92,7 +92,7 @@ impl Default for Params {
             merge_within_region: true,
             within_max_rms_ratio: 1.5,
             merge_max_angle_deg: 10.0,
-            merge_max_residual: 2.0,
+            merge_max_residual: 3.0,
             fill_max_residual: 2.0,
             fill_rms_ratio: 2.0,
             refine_passes: 10,
