@@ -91,6 +91,8 @@ pub struct Scratch {
     /// Step 5: the refinement's buffers and the planes refitted on the refined regions.
     refine: refine::Buffers,
     refitted: Vec<Plane>,
+    /// Steps 2 and 5: the 3D points of one row.
+    row: Vec<[f64; 3]>,
     /// Steps 4–6: the merge forest, the root of each label, the final label of each root and the roots in
     /// order of first pixel.
     parent: Vec<u32>,
@@ -137,6 +139,7 @@ pub fn segment_into(
         merge: mbufs,
         refine: rbufs,
         refitted,
+        row,
         parent,
         root,
         map,
@@ -156,7 +159,7 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, sizes, kept, guide, params.min_region_px);
+    pieces.fit(&scene, (sizes, kept, row), guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -182,7 +185,7 @@ pub fn segment_into(
         if refine::refine(&scene, &mut pieces.comp, &pieces.planes, limit, params.refine_passes, rbufs) > 0 {
             refitted.clear();
             refitted.extend_from_slice(&pieces.planes);
-            refine::refit(&scene, &pieces.comp, refitted, rbufs);
+            refine::refit(&scene, &pieces.comp, refitted, (rbufs, row));
             refine::refine(&scene, &mut pieces.comp, refitted, limit, params.refine_passes, rbufs);
         }
     }
@@ -206,6 +209,16 @@ impl Scene<'_> {
     #[inline]
     fn point(&self, x: usize, y: usize) -> Option<[f64; 3]> {
         self.camera.point(x as f64, y as f64, f64::from(self.range[y * self.w + x]))
+    }
+
+    /// The range values of row `y` and, into `out` (resized to the width), their 3D points: [`Scene::point`]'s
+    /// bits where the value is finite, meaningless elsewhere. Inlined, for callers in `isa::dispatch`.
+    #[inline(always)]
+    fn row_points(&self, y: usize, out: &mut Vec<[f64; 3]>) -> &[f32] {
+        let vals = &self.range[y * self.w..(y + 1) * self.w];
+        out.resize(self.w, [0.0; 3]);
+        self.camera.row_points(y as u32, vals, out);
+        vals
     }
 }
 
@@ -252,8 +265,7 @@ impl Pieces {
     fn fit(
         &mut self,
         scene: &Scene<'_>,
-        sizes: &[u32],
-        kept: &mut Vec<u32>,
+        (sizes, kept, row): (&[u32], &mut Vec<u32>, &mut Vec<[f64; 3]>),
         guide: Option<&[u32]>,
         min_region_px: u32,
     ) {
@@ -279,42 +291,53 @@ impl Pieces {
         self.moments.clear();
         self.moments.reserve(room);
         self.moments.resize(n, Moments::default());
-        // Runs of one component are summed in a local copy of its moments (the same additions in
-        // the same order, but in registers).
-        let mut cur = 0u32;
-        let mut acc = Moments::default();
-        let moments = &mut self.moments;
-        for y in 0..h {
-            let row = &mut self.comp[y * w..(y + 1) * w];
-            for (x, c) in row.iter_mut().enumerate() {
-                if *c == 0 {
-                    continue;
-                }
-                *c = kept[*c as usize - 1];
-                if *c == 0 {
-                    continue;
-                }
-                if let Some(g) = guide {
-                    self.guide[*c as usize - 1] = g[y * w + x];
-                }
-                if let Some(p) = scene.point(x, y) {
-                    if *c != cur {
-                        if cur != 0 {
-                            moments[cur as usize - 1] = acc;
-                        }
-                        cur = *c;
-                        acc = moments[cur as usize - 1];
+        let (comp, guides, moments) = (&mut self.comp, &mut self.guide, &mut self.moments);
+        // Compiled for the best instruction set of this CPU, so each row's points are computed several at a
+        // time (the same bits on every one).
+        isa::dispatch(
+            #[inline(always)]
+            || {
+                // Runs of one component are summed in a local copy of its moments (the same additions in
+                // the same order, but in registers).
+                let mut cur = 0u32;
+                let mut acc = Moments::default();
+                for y in 0..h {
+                    let labels = &mut comp[y * w..(y + 1) * w];
+                    if labels.iter().all(|&c| c == 0) {
+                        continue;
                     }
-                    acc.add(p);
+                    let vals = scene.row_points(y, row);
+                    for (x, c) in labels.iter_mut().enumerate() {
+                        if *c == 0 {
+                            continue;
+                        }
+                        *c = kept[*c as usize - 1];
+                        if *c == 0 {
+                            continue;
+                        }
+                        if let Some(g) = guide {
+                            guides[*c as usize - 1] = g[y * w + x];
+                        }
+                        if vals[x].is_finite() {
+                            if *c != cur {
+                                if cur != 0 {
+                                    moments[cur as usize - 1] = acc;
+                                }
+                                cur = *c;
+                                acc = moments[cur as usize - 1];
+                            }
+                            acc.add(row[x]);
+                        }
+                    }
                 }
-            }
-        }
-        if cur != 0 {
-            moments[cur as usize - 1] = acc;
-        }
+                if cur != 0 {
+                    moments[cur as usize - 1] = acc;
+                }
+            },
+        );
         self.planes.clear();
         self.planes.reserve(room);
-        self.planes.extend(moments.iter().map(|m| fit_plane(m, scene.camera)));
+        self.planes.extend(self.moments.iter().map(|m| fit_plane(m, scene.camera)));
     }
 
     /// Step 5: into `labels` (the memory of `self.comp`) and `regions`, the merged groups of `parent` numbered
