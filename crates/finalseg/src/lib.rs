@@ -784,4 +784,32 @@ mod tests {
             }
         }
     }
+    #[test]
+    fn every_instruction_set_gives_the_same_segmentation() {
+        let cams = [
+            Camera::Grid,
+            Camera::ABW0,
+            Camera::Pinhole { fx: 52.0, fy: 51.0, cx: 29.5, cy: 19.5, depth_scale: 0.001 },
+        ];
+        for (k, cam) in cams.iter().enumerate() {
+            for (j, p) in
+                [Params { min_region_px: 5, gap_close_px: 1.5, ..regions_mode() }, Params::default()]
+                    .iter()
+                    .enumerate()
+            {
+                let (range, edges, guide) = random_scene(60, 40, (10 + 2 * k + j) as u64);
+                let run = || segment(&range, cam, &edges, Some(&guide), p);
+                let want = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+                for other in isa::Isa::available() {
+                    let got = isa::with_isa(other, run).expect("available");
+                    assert_eq!(got.0, want.0, "camera {k}, params {j}, {other:?}");
+                    assert_eq!(
+                        format!("{:?}", got.1),
+                        format!("{:?}", want.1),
+                        "camera {k}, params {j}, {other:?}"
+                    );
+                }
+            }
+        }
+    }
 }

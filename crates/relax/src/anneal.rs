@@ -529,7 +529,7 @@ impl<C: Cell> State<C> {
     /// move is not allowed; ΔE = ΔEⁱ − λ·Δsum. For a C2 point the occupancy is left moved and
     /// `scratch` holds the pending updates; the caller must then [`State::commit`] or
     /// [`State::revert`].
-    #[inline]
+    #[inline(always)]
     fn propose(&mut self, i: usize, dir: usize) -> Option<(f64, f64)> {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
@@ -595,7 +595,7 @@ impl<C: Cell> State<C> {
     }
 
     /// Applies the pending proposal of point `i` by `dir`.
-    #[inline]
+    #[inline(always)]
     fn commit(&mut self, i: usize, dir: usize, d_int: f64, d_ext: f64) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
@@ -613,7 +613,7 @@ impl<C: Cell> State<C> {
     }
 
     /// Undoes the occupancy change of a rejected C2 proposal.
-    #[inline]
+    #[inline(always)]
     fn revert(&mut self, i: usize, dir: usize) {
         if i >= self.n1 {
             let a = self.pos[i] as usize;
@@ -627,7 +627,9 @@ impl<C: Cell> State<C> {
     /// (point, direction) come from `moves`, the Metropolis coins from `coins`. The moves are
     /// drawn `LOOK` steps ahead and the memory they will touch is read early, so the cache
     /// misses of several moves overlap (the `LOOK` moves still pending at the end of the sweep
-    /// are dropped, so the stream is a fixed function of the seeds and the sweep lengths).
+    /// are dropped, so the stream is a fixed function of the seeds and the sweep lengths). Inlined, for
+    /// its caller's `isa::dispatch`.
+    #[inline(always)]
     pub(crate) fn sweep(
         &mut self,
         moves: &mut Xoshiro256PlusPlus,
@@ -656,7 +658,7 @@ impl<C: Cell> State<C> {
     }
 
     /// Reads the cells a future move of point `i` by `dir` will read (a software prefetch).
-    #[inline]
+    #[inline(always)]
     fn touch(&self, i: usize, dir: usize) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
@@ -676,7 +678,7 @@ impl<C: Cell> State<C> {
     }
 
     /// Tries moving point `i` by `dir` at temperature `t` (coin from `coins` if uphill).
-    #[inline]
+    #[inline(always)]
     fn attempt(&mut self, i: usize, dir: usize, rng: &mut Xoshiro256PlusPlus, t: f64) -> bool {
         let Some((d_int, d_ext)) = self.propose(i, dir) else {
             return false;
