@@ -173,7 +173,7 @@ fn for_runs(
         if lrow.iter().all(|&l| l == 0) {
             continue;
         }
-        row_points(camera, y, rrow, row);
+        camera.row_points(y, rrow, row);
         let mut x = 0;
         while x < w {
             let l = lrow[x];
@@ -184,38 +184,6 @@ fn for_runs(
             }
             if l != 0 {
                 f((start as u32, y), &rrow[start..x], &row[start..x], l);
-            }
-        }
-    }
-}
-
-/// The 3D points of row `y` with values `vals` into `out`: [`Camera::point`]'s formulas, operation for operation
-/// (the same bits), with the camera model resolved once per row; points of non-finite values are meaningless.
-#[inline(always)]
-fn row_points(camera: &Camera, y: u32, vals: &[f32], out: &mut [[f64; 3]]) {
-    let y = f64::from(y);
-    let cols = vals.iter().zip(out.iter_mut()).zip(0u32..);
-    match *camera {
-        Camera::Abw(cal) => {
-            let f = cal.f.abs();
-            // `(255 − y) / c · d / f` groups as `((255 − y) / c · d) / f`.
-            let ty = (255.0 - y) / cal.c;
-            for ((&v, o), x) in cols {
-                let v = f64::from(v);
-                let d = v / cal.scal + cal.offset;
-                *o = [(f64::from(x) - 255.0) * d / f, ty * d / f, (255.0 - v) / cal.scal];
-            }
-        }
-        Camera::Pinhole { fx, fy, cx, cy, depth_scale } => {
-            let ty = y - cy;
-            for ((&v, o), x) in cols {
-                let z = f64::from(v) * depth_scale;
-                *o = [(f64::from(x) - cx) * z / fx, ty * z / fy, z];
-            }
-        }
-        Camera::Grid => {
-            for ((&v, o), x) in cols {
-                *o = [f64::from(x), y, f64::from(v)];
             }
         }
     }

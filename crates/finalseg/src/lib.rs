@@ -96,6 +96,8 @@ pub struct Scratch {
     /// Step 5: the refinement's buffers and the planes refitted on the refined regions.
     refine: refine::Buffers,
     refitted: Vec<Plane>,
+    /// Steps 2 and 5: the 3D points of one row.
+    row: Vec<[f64; 3]>,
     /// Steps 4–6: the merge forest, the root of each label, the final label of each root and the roots in
     /// order of first pixel.
     parent: Vec<u32>,
@@ -142,6 +144,7 @@ pub fn segment_into(
         merge: mbufs,
         refine: rbufs,
         refitted,
+        row,
         parent,
         root,
         map,
@@ -161,7 +164,7 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, sizes, kept, guide, params.min_region_px);
+    pieces.fit(&scene, (sizes, kept, row), guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -187,7 +190,7 @@ pub fn segment_into(
         if refine::refine(&scene, &mut pieces.comp, &pieces.planes, limit, params.refine_passes, rbufs) > 0 {
             refitted.clear();
             refitted.extend_from_slice(&pieces.planes);
-            refine::refit(&scene, &pieces.comp, refitted, rbufs);
+            refine::refit(&scene, &pieces.comp, refitted, (rbufs, row));
             refine::refine(&scene, &mut pieces.comp, refitted, limit, params.refine_passes, rbufs);
         }
     }
@@ -211,6 +214,16 @@ impl Scene<'_> {
     #[inline]
     fn point(&self, x: usize, y: usize) -> Option<[f64; 3]> {
         self.camera.point(x as f64, y as f64, f64::from(self.range[y * self.w + x]))
+    }
+
+    /// The range values of row `y` and, into `out` (resized to the width), their 3D points: [`Scene::point`]'s
+    /// bits where the value is finite, meaningless elsewhere. Inlined, for callers in `isa::dispatch`.
+    #[inline(always)]
+    fn row_points(&self, y: usize, out: &mut Vec<[f64; 3]>) -> &[f32] {
+        let vals = &self.range[y * self.w..(y + 1) * self.w];
+        out.resize(self.w, [0.0; 3]);
+        self.camera.row_points(y as u32, vals, out);
+        vals
     }
 }
 
@@ -257,8 +270,7 @@ impl Pieces {
     fn fit(
         &mut self,
         scene: &Scene<'_>,
-        sizes: &[u32],
-        kept: &mut Vec<u32>,
+        (sizes, kept, row): (&[u32], &mut Vec<u32>, &mut Vec<[f64; 3]>),
         guide: Option<&[u32]>,
         min_region_px: u32,
     ) {
@@ -284,42 +296,53 @@ impl Pieces {
         self.moments.clear();
         self.moments.reserve(room);
         self.moments.resize(n, Moments::default());
-        // Runs of one component are summed in a local copy of its moments (the same additions in
-        // the same order, but in registers).
-        let mut cur = 0u32;
-        let mut acc = Moments::default();
-        let moments = &mut self.moments;
-        for y in 0..h {
-            let row = &mut self.comp[y * w..(y + 1) * w];
-            for (x, c) in row.iter_mut().enumerate() {
-                if *c == 0 {
-                    continue;
-                }
-                *c = kept[*c as usize - 1];
-                if *c == 0 {
-                    continue;
-                }
-                if let Some(g) = guide {
-                    self.guide[*c as usize - 1] = g[y * w + x];
-                }
-                if let Some(p) = scene.point(x, y) {
-                    if *c != cur {
-                        if cur != 0 {
-                            moments[cur as usize - 1] = acc;
-                        }
-                        cur = *c;
-                        acc = moments[cur as usize - 1];
+        let (comp, guides, moments) = (&mut self.comp, &mut self.guide, &mut self.moments);
+        // Compiled for the best instruction set of this CPU, so each row's points are computed several at a
+        // time (the same bits on every one).
+        isa::dispatch(
+            #[inline(always)]
+            || {
+                // Runs of one component are summed in a local copy of its moments (the same additions in
+                // the same order, but in registers).
+                let mut cur = 0u32;
+                let mut acc = Moments::default();
+                for y in 0..h {
+                    let labels = &mut comp[y * w..(y + 1) * w];
+                    if labels.iter().all(|&c| c == 0) {
+                        continue;
                     }
-                    acc.add(p);
+                    let vals = scene.row_points(y, row);
+                    for (x, c) in labels.iter_mut().enumerate() {
+                        if *c == 0 {
+                            continue;
+                        }
+                        *c = kept[*c as usize - 1];
+                        if *c == 0 {
+                            continue;
+                        }
+                        if let Some(g) = guide {
+                            guides[*c as usize - 1] = g[y * w + x];
+                        }
+                        if vals[x].is_finite() {
+                            if *c != cur {
+                                if cur != 0 {
+                                    moments[cur as usize - 1] = acc;
+                                }
+                                cur = *c;
+                                acc = moments[cur as usize - 1];
+                            }
+                            acc.add(row[x]);
+                        }
+                    }
                 }
-            }
-        }
-        if cur != 0 {
-            moments[cur as usize - 1] = acc;
-        }
+                if cur != 0 {
+                    moments[cur as usize - 1] = acc;
+                }
+            },
+        );
         self.planes.clear();
         self.planes.reserve(room);
-        self.planes.extend(moments.iter().map(|m| fit_plane(m, scene.camera)));
+        self.planes.extend(self.moments.iter().map(|m| fit_plane(m, scene.camera)));
     }
 
     /// Step 5: into `labels` (the memory of `self.comp`) and `regions`, the merged groups of `parent` numbered
@@ -785,6 +808,34 @@ mod tests {
                 segment_into(&range, &Camera::Grid, &edges, Some(&guide), p, &mut scratch, out);
                 assert_eq!(labels, want.0, "frame {k}, params {j}");
                 assert_eq!(format!("{regions:?}"), format!("{:?}", want.1), "frame {k}, params {j}");
+            }
+        }
+    }
+    #[test]
+    fn every_instruction_set_gives_the_same_segmentation() {
+        let cams = [
+            Camera::Grid,
+            Camera::ABW0,
+            Camera::Pinhole { fx: 52.0, fy: 51.0, cx: 29.5, cy: 19.5, depth_scale: 0.001 },
+        ];
+        for (k, cam) in cams.iter().enumerate() {
+            for (j, p) in
+                [Params { min_region_px: 5, gap_close_px: 1.5, ..regions_mode() }, Params::default()]
+                    .iter()
+                    .enumerate()
+            {
+                let (range, edges, guide) = random_scene(60, 40, (10 + 2 * k + j) as u64);
+                let run = || segment(&range, cam, &edges, Some(&guide), p);
+                let want = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+                for other in isa::Isa::available() {
+                    let got = isa::with_isa(other, run).expect("available");
+                    assert_eq!(got.0, want.0, "camera {k}, params {j}, {other:?}");
+                    assert_eq!(
+                        format!("{:?}", got.1),
+                        format!("{:?}", want.1),
+                        "camera {k}, params {j}, {other:?}"
+                    );
+                }
             }
         }
     }

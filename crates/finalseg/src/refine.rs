@@ -87,18 +87,49 @@ pub(crate) fn refine(
 }
 
 /// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
-/// moments summed in raster order; a label without pixels keeps its plane.
-pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], planes: &mut [Plane], bufs: &mut Buffers) {
+/// moments summed in raster order; a label without pixels keeps its plane. `row` holds one row of 3D points.
+pub(crate) fn refit(
+    scene: &Scene<'_>,
+    groups: &[u32],
+    planes: &mut [Plane],
+    (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
+) {
     let moments = &mut bufs.moments;
     moments.clear();
     moments.resize(planes.len(), Moments::default());
-    for (i, &l) in groups.iter().enumerate() {
-        if l != 0
-            && let Some(p) = scene.point(i % scene.w, i / scene.w)
-        {
-            moments[l as usize - 1].add(p);
-        }
-    }
+    let w = scene.w;
+    // Compiled for the best instruction set of this CPU, so each row's points are computed several at a time
+    // (the same bits on every one).
+    isa::dispatch(
+        #[inline(always)]
+        || {
+            // Runs of one label are summed in a local copy of its moments (the same additions in the same
+            // order, but in registers).
+            let mut cur = 0u32;
+            let mut acc = Moments::default();
+            for (y, labels) in groups.chunks_exact(w.max(1)).enumerate() {
+                if labels.iter().all(|&l| l == 0) {
+                    continue;
+                }
+                let vals = scene.row_points(y, row);
+                for (x, &l) in labels.iter().enumerate() {
+                    if l != 0 && vals[x].is_finite() {
+                        if l != cur {
+                            if cur != 0 {
+                                moments[cur as usize - 1] = acc;
+                            }
+                            cur = l;
+                            acc = moments[cur as usize - 1];
+                        }
+                        acc.add(row[x]);
+                    }
+                }
+            }
+            if cur != 0 {
+                moments[cur as usize - 1] = acc;
+            }
+        },
+    );
     for (plane, m) in planes.iter_mut().zip(moments.iter()) {
         if m.n > 0.0 {
             *plane = fit_plane(m, scene.camera);

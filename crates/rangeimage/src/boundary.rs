@@ -27,6 +27,9 @@ pub fn label_boundaries_into(labels: &LabelImage, is_region: impl Fn(u32) -> boo
     boundaries_into(labels, is_region, true, out);
 }
 
+/// The boundaries of [`region_borders`] (`separators = false`) or [`label_boundaries`] into `out`. An interior pixel
+/// whose four neighbours all carry its own label is never one (a region pixel then has no neighbour in another
+/// region; a non-region pixel has no region neighbour), so only the other pixels go through the full rule.
 fn boundaries_into(
     labels: &LabelImage,
     is_region: impl Fn(u32) -> bool,
@@ -34,23 +37,49 @@ fn boundaries_into(
     out: &mut EdgeMap,
 ) {
     let (w, h) = labels.dimensions();
-    let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| is_region(l));
     out.reset(w, h, false);
+    let (w, h) = (w as usize, h as usize);
+    let l = labels.as_slice();
     let o = out.as_mut_slice();
+    let full = |x: usize, y: usize| boundary_at(labels, &is_region, separators, x as i64, y as i64);
     for y in 0..h {
-        for x in 0..w {
-            let i = y as usize * w as usize + x as usize;
-            let (x, y) = (i64::from(x), i64::from(y));
-            let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
-            o[i] = match at(x, y) {
-                Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
-                None if separators => {
-                    let mut it = nb.iter().flatten();
-                    it.next().is_some_and(|&first| it.any(|&m| m != first))
-                }
-                None => false,
-            };
+        let orow = &mut o[y * w..(y + 1) * w];
+        if y == 0 || y + 1 == h || w < 3 {
+            for (x, e) in orow.iter_mut().enumerate() {
+                *e = full(x, y);
+            }
+            continue;
         }
+        let (up, row, down) = (&l[(y - 1) * w..y * w], &l[y * w..(y + 1) * w], &l[(y + 1) * w..(y + 2) * w]);
+        orow[0] = full(0, y);
+        orow[w - 1] = full(w - 1, y);
+        for x in 1..w - 1 {
+            let c = row[x];
+            if c != row[x - 1] || c != row[x + 1] || c != up[x] || c != down[x] {
+                orow[x] = full(x, y);
+            }
+        }
+    }
+}
+
+/// The rule of [`boundaries_into`] at pixel `(x, y)`.
+#[inline]
+fn boundary_at(
+    labels: &LabelImage,
+    is_region: impl Fn(u32) -> bool,
+    separators: bool,
+    x: i64,
+    y: i64,
+) -> bool {
+    let at = |x: i64, y: i64| labels.get_signed(x, y).copied().filter(|&l| is_region(l));
+    let nb = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
+    match at(x, y) {
+        Some(l) => nb.iter().any(|n| n.is_some_and(|m| m != l)),
+        None if separators => {
+            let mut it = nb.iter().flatten();
+            it.next().is_some_and(|&first| it.any(|&m| m != first))
+        }
+        None => false,
     }
 }
 
@@ -70,5 +99,36 @@ mod tests {
         // Which labels are regions is the caller's: with 11 not a region, nothing borders 10.
         let b = region_borders(&labels, |l| l == 10 || l == 12);
         assert!(b.as_slice().iter().all(|&e| !e));
+    }
+    #[test]
+    fn interior_shortcut_matches_the_rule_at_every_pixel() {
+        // A fixed pseudo-random sequence (an LCG): label images of few labels with runs, every size from 1×1.
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move |n: u32| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 33) % u64::from(n)) as u32
+        };
+        for k in 0..300 {
+            let (w, h) = (1 + next(12), 1 + next(12));
+            let mut v = Vec::new();
+            for _ in 0..w * h {
+                // Mostly repeats of the previous label, so interior pixels of one label are common.
+                let l = if !v.is_empty() && next(4) > 0 { *v.last().unwrap() } else { next(4) };
+                v.push(l);
+            }
+            let labels = Grid::from_vec(w, h, v).unwrap();
+            for separators in [false, true] {
+                for (j, region) in
+                    [|l: u32| l != 0, |l: u32| l == 1 || l == 3, |_| true].into_iter().enumerate()
+                {
+                    let mut got = EdgeMap::default();
+                    boundaries_into(&labels, region, separators, &mut got);
+                    let want = Grid::from_fn(w, h, |x, y| {
+                        boundary_at(&labels, region, separators, i64::from(x), i64::from(y))
+                    });
+                    assert_eq!(got, want, "case {k} ({w}×{h}), separators {separators}, region rule {j}");
+                }
+            }
+        }
     }
 }

@@ -1,6 +1,6 @@
 //! Per-region statistics and the deterministic merge fixpoint over the region adjacency graph.
 
-use crate::plane::{Moments, Plane, dot};
+use crate::plane::{Moments, Plane, dot, smallest_axis_exceeds};
 use crate::{Mode, Params};
 use rangeimage::union_find::find;
 
@@ -154,7 +154,12 @@ impl Criterion {
         let (pa, pb) = (pa?, pb?);
         let own = ((a.mom.n * pa.mean_sq + b.mom.n * pb.mean_sq) / (a.mom.n + b.mom.n)).max(0.0).sqrt();
         let limit = self.max_residual.min(self.joint_ratio * own);
-        let rms = Plane::fit(&a.mom.combined(&b.mom), |_| pa.normal)?.mean_sq.max(0.0).sqrt();
+        let joint = a.mom.combined(&b.mom);
+        // A pair whose joint spread certainly exceeds the limit fails without the eigen-decomposition.
+        if smallest_axis_exceeds(&joint, limit * limit) {
+            return None;
+        }
+        let rms = Plane::fit(&joint, |_| pa.normal)?.mean_sq.max(0.0).sqrt();
         (rms <= limit && limit > 0.0).then(|| 1.0 + rms / limit)
     }
 

@@ -74,6 +74,37 @@ impl Plane {
     }
 }
 
+/// Whether the smallest eigenvalue [`Moments::axes`] gives for `m`'s covariance is certainly above `t` (`false`
+/// when unsure): a cheap test that skips eigen-decompositions whose result could not pass a threshold.
+///
+/// With `C` the covariance as computed and `M` its largest entry (in magnitude), `λ₀ ≥ det C / E₂` where `E₂` is
+/// the sum of `C`'s principal 2×2 minors (`λ₁λ₂ ≤ E₂` when every eigenvalue is positive, which `tr, E₂, det > 0`
+/// ensure). The rounding of `det C` and `E₂` here is counted as `10⁻¹² M³` and `10⁻¹² M²` (thousands of times
+/// the worst case of a few dozen ulps), the eigen-solver's error as `10⁻¹² M` (it is backward stable: every
+/// computed eigenvalue lies within a small multiple of `ε‖C‖ ≤ 3εM` of a true one), and `t` gets a relative margin
+/// of `10⁻⁹` for the square root a caller may take.
+pub(crate) fn smallest_axis_exceeds(m: &Moments, t: f64) -> bool {
+    const TOL: f64 = 1e-12;
+    let c = m.covariance();
+    let (a, b, e, d, f, g) = (c[(0, 0)], c[(0, 1)], c[(0, 2)], c[(1, 1)], c[(1, 2)], c[(2, 2)]);
+    let entries = [a, b, e, d, f, g];
+    if !entries.iter().all(|v| v.is_finite()) {
+        return false;
+    }
+    let big = entries.iter().fold(0.0f64, |x, v| x.max(v.abs()));
+    let (m2, m3) = (big * big, big * big * big);
+    let (dg, eg, df) = (d * g - f * f, b * g - f * e, b * f - d * e);
+    let det = a * dg - b * eg + e * df;
+    let e2 = (a * d - b * b) + (a * g - e * e) + dg;
+    let tr = a + d + g;
+    let (det_lo, e2_lo, e2_hi) = (det - TOL * m3, e2 - TOL * m2, e2 + TOL * m2);
+    if !(tr > 3.0 * TOL * big && e2_lo > 0.0 && det_lo > 0.0) {
+        return false;
+    }
+    let bound = det_lo / e2_hi * (1.0 - TOL) - TOL * big;
+    bound > t * (1.0 + 1e-9)
+}
+
 /// Cross product.
 #[inline]
 pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -127,5 +158,48 @@ mod tests {
         two.add([1.0; 3]);
         assert!(Plane::fit(&two, |_| [0.0, 0.0, 1.0]).is_none());
         assert_eq!(two.combined(&m).n, 7.0);
+    }
+    #[test]
+    fn smallest_axis_bound_never_exceeds_the_solver() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+        let (mut tight, mut cases) = (0, 0);
+        for k in 0..4000 {
+            // Points near a random plane (noise from 0 to isotropic), some near a line, at several scales
+            // and offsets from the origin.
+            let scale = 10f64.powi(rng.random_range(-3..4));
+            let off =
+                [0, 1, 2].map(|_| rng.random_range(-1.0..1.0) * scale * 10f64.powi(rng.random_range(0..4)));
+            let noise = [0.0, 1e-9, 1e-4, 1e-2, 0.3, 1.0][k % 6];
+            let line = k % 7 == 0;
+            let n = rng.random_range(3..60);
+            let mut m = Moments::default();
+            for _ in 0..n {
+                let (u, v) =
+                    (rng.random_range(-1.0..1.0), if line { 0.0 } else { rng.random_range(-1.0..1.0) });
+                let w = noise * rng.random_range(-1.0..1.0);
+                m.add([
+                    off[0] + scale * (u + 0.3 * v),
+                    off[1] + scale * (v - 0.2 * w),
+                    off[2] + scale * (w + 0.5 * u),
+                ]);
+            }
+            let ev = m.axes().values;
+            let l0 = ev[0].min(ev[1]).min(ev[2]);
+            cases += 1;
+            // Never claims more than the solver's own smallest eigenvalue.
+            assert!(!smallest_axis_exceeds(&m, l0), "case {k}: bound above the solver's {l0}");
+            assert!(!smallest_axis_exceeds(&m, l0.max(0.0)), "case {k}");
+            if l0 > 0.0 && smallest_axis_exceeds(&m, 0.25 * l0) {
+                tight += 1;
+            }
+            // The skip it allows: a plane test at threshold t fails whenever the bound exceeds t.
+            let t = l0 * [0.5, 0.9, 0.999_999, 1.0, 2.0][k % 5];
+            if smallest_axis_exceeds(&m, t) {
+                assert!(Plane::fit(&m, |_| [0.0, 0.0, 1.0]).is_none_or(|p| p.mean_sq > t), "case {k}");
+            }
+        }
+        // Useful as well as safe: on most non-degenerate sets it is within a factor 4.
+        assert!(tight * 3 > cases, "bound tight on only {tight} of {cases} sets");
     }
 }

@@ -1,7 +1,7 @@
 //! The annealing state: point lists, compact occupancy grids and the incremental energy.
 //!
 //! Moves hit random places of the image, so the state is laid out for few cache misses: one
-//! byte of flags per cell (valid, C2 occupied), one `u16` per cell that is both the C1
+//! byte of flags per cell (valid, C2 occupied), one [`Cell`] (`u8`, or `u16` for caps over 15.8 px) per cell that is both the C1
 //! occupancy and the cached nearest-C2 squared distance of the C1 point there, and one `f32`
 //! array per strength. [`State::sweep`] draws its moves a few steps ahead and reads the cells
 //! they will need early, so the cache misses of consecutive moves overlap.
@@ -19,12 +19,64 @@ use rangeimage::{EdgeMap, Grid};
 
 /// "No C2 point within the cap" (as a squared distance).
 pub(crate) const NONE: u32 = u32::MAX;
-/// `c1d2` value of a cell without a C1 point.
-const EMPTY: u16 = u16::MAX;
-/// `c1d2` value of a C1 point with no C2 point within the cap.
-const FAR16: u16 = u16::MAX - 1;
 const VALID: u8 = 1;
 const OCC2: u8 = 2;
+
+/// The type of a `c1d2` cell (and of the window tables compared with it): `u8` when `⌊cap²⌋ ≤ 252` (the
+/// default cap of 10 px gives 100), else `u16`. A byte per cell halves the memory the window scans read and
+/// doubles the cells per vector; the decisions and sums are the same.
+pub(crate) trait Cell: Copy + PartialEq + PartialOrd + 'static {
+    /// `c1d2` value of a cell without a C1 point.
+    const EMPTY: Self;
+    /// `c1d2` value of a C1 point with no C2 point within the cap.
+    const FAR: Self;
+    /// `Window::da` value beyond the cap (never equal to a `c1d2` value).
+    const FAR_A: Self;
+    /// The largest `⌊cap²⌋` the type holds below `FAR_A`.
+    const MAX_CAP2: u32;
+    /// The cell of squared distance `d2 ≤ MAX_CAP2`.
+    fn of(d2: u32) -> Self;
+    /// The value as a `u32`.
+    fn get(self) -> u32;
+    /// This type's `c1d2` vector in `b`.
+    fn buf(b: &mut Buffers) -> &mut Vec<Self>;
+}
+
+impl Cell for u16 {
+    const EMPTY: Self = u16::MAX;
+    const FAR: Self = u16::MAX - 1;
+    const FAR_A: Self = u16::MAX - 3;
+    const MAX_CAP2: u32 = u16::MAX as u32 - 4;
+    #[inline(always)]
+    fn of(d2: u32) -> Self {
+        d2 as u16
+    }
+    #[inline(always)]
+    fn get(self) -> u32 {
+        u32::from(self)
+    }
+    fn buf(b: &mut Buffers) -> &mut Vec<Self> {
+        &mut b.c1d2
+    }
+}
+
+impl Cell for u8 {
+    const EMPTY: Self = u8::MAX;
+    const FAR: Self = u8::MAX - 1;
+    const FAR_A: Self = u8::MAX - 2;
+    const MAX_CAP2: u32 = u8::MAX as u32 - 3;
+    #[inline(always)]
+    fn of(d2: u32) -> Self {
+        d2 as u8
+    }
+    #[inline(always)]
+    fn get(self) -> u32 {
+        u32::from(self)
+    }
+    fn buf(b: &mut Buffers) -> &mut Vec<Self> {
+        &mut b.c1d8
+    }
+}
 
 /// Capped distance term shared by the incremental state and [`crate::energy`].
 #[derive(Debug, Clone)]
@@ -41,7 +93,7 @@ impl DistanceTerm {
     /// The term for distance cap `cap` (pixels, finite, 0 ≤ cap ≤ 65).
     pub(crate) fn new(cap: f64) -> Self {
         let cap2 = (cap * cap).floor() as u32;
-        assert!(cap2 < u32::from(FAR16), "distance cap {cap} too large");
+        assert!(cap2 <= <u16 as Cell>::MAX_CAP2, "distance cap {cap} too large");
         let lut = (0..=cap2).map(|d2| f64::from(d2).sqrt()).collect();
         Self { cap, cap2, lut }
     }
@@ -53,28 +105,31 @@ impl DistanceTerm {
         if d2 <= self.cap2 { self.lut[d2 as usize] } else { self.cap }
     }
 
+    /// [`DistanceTerm::value`] of a `c1d2` cell value (its `FAR` is above every `cap2` it holds).
     #[inline]
-    fn value16(&self, d2: u16) -> f64 {
-        self.value(u32::from(d2))
+    fn value_of<C: Cell>(&self, d2: C) -> f64 {
+        self.value(d2.get())
     }
 }
 
 /// Per move direction: the `win_h × win_w` window (row-major) that covers the disks of radius
 /// `cap` around both the source a and the target b of a C2 move, as squared distances to a
-/// and to b (`FAR_A` / `FAR16` outside the respective disk), so the cells whose cached
+/// and to b (`C::FAR_A` / `C::FAR` outside the respective disk), so the cells whose cached
 /// distance may change are found by branch-free, vectorisable row scans.
-#[derive(Default)]
-struct Window {
+struct Window<C> {
     /// Linear offset of the window's top-left cell relative to a.
     origin: isize,
-    /// Squared distance to a, or `FAR_A` beyond the cap.
-    da: Vec<u16>,
-    /// Squared distance to b, or `FAR16` beyond the cap.
-    db: Vec<u16>,
+    /// Squared distance to a, or `C::FAR_A` beyond the cap.
+    da: Vec<C>,
+    /// Squared distance to b, or `C::FAR` beyond the cap.
+    db: Vec<C>,
 }
 
-/// `Window::da` value beyond the cap (never equal to a `c1d2` value).
-const FAR_A: u16 = u16::MAX - 3;
+impl<C> Default for Window<C> {
+    fn default() -> Self {
+        Self { origin: 0, da: Vec::new(), db: Vec::new() }
+    }
+}
 /// Window width granularity (cells per vector chunk).
 const LANES: usize = 16;
 /// How many moves ahead [`State::sweep`] draws and prefetches.
@@ -84,13 +139,13 @@ const LOOK: usize = 16;
 /// distance `da` moves to squared distance `db`: b is strictly closer, or the moved point was
 /// at the cached distance (and b is not at the same distance).
 #[inline(always)]
-fn affected(old: u16, da: u16, db: u16) -> bool {
-    (old != EMPTY) & (db < old) | (old == da) & (db != old)
+fn affected<C: Cell>(old: C, da: C, db: C) -> bool {
+    (old != C::EMPTY) & (db < old) | (old == da) & (db != old)
 }
 
 /// Whether any cell of a window row is [`affected`] (branch-free over 16-cell chunks).
 #[inline(always)]
-fn row_hit(old: &[u16], da: &[u16], db: &[u16]) -> bool {
+fn row_hit<C: Cell>(old: &[C], da: &[C], db: &[C]) -> bool {
     let mut acc = [false; LANES];
     for ((o, a), b) in old.chunks_exact(LANES).zip(da.chunks_exact(LANES)).zip(db.chunks_exact(LANES)) {
         for j in 0..LANES {
@@ -101,15 +156,15 @@ fn row_hit(old: &[u16], da: &[u16], db: &[u16]) -> bool {
 }
 
 /// Squared distance from padded cell `p` to the nearest C2 point (`OCC2` in `flags`) within the
-/// cap, or `FAR16`, when none is known to be closer than squared distance `from`.
+/// cap, or `C::FAR`, when none is known to be closer than squared distance `from`.
 #[inline]
-fn nearest_in(flags: &[u8], disk: &[(isize, u16)], start: &[u32], p: usize, from: u16) -> u16 {
-    for &(off, d2) in &disk[start[usize::from(from)] as usize..] {
+fn nearest_in<C: Cell>(flags: &[u8], disk: &[(isize, C)], start: &[u32], p: usize, from: usize) -> C {
+    for &(off, d2) in &disk[start[from] as usize..] {
         if flags[(p as isize + off) as usize] & OCC2 != 0 {
             return d2;
         }
     }
-    FAR16
+    C::FAR
 }
 
 /// `u < exp(−x)` for `x ≥ 0` and `u` a multiple of 2⁻⁵³ in [0, 1) (as `rand` samples f64): for
@@ -121,7 +176,7 @@ fn metropolis(u: f64, x: f64) -> bool {
 
 /// The offsets within the cap (`r = ⌊cap⌋`, `cap2 = ⌊cap²⌋`) on a padded grid of width `pw`, sorted by
 /// squared distance, and the index of the first one at each squared distance: [`State`]'s `disk` and `start`.
-fn disk_tables(r: i32, cap2: u32, pw: usize) -> (Vec<(isize, u16)>, Vec<u32>) {
+fn disk_tables<C: Cell>(r: i32, cap2: u32, pw: usize) -> (Vec<(isize, C)>, Vec<u32>) {
     let mut disk = Vec::new();
     for dy in -r..=r {
         for dx in -r..=r {
@@ -132,25 +187,27 @@ fn disk_tables(r: i32, cap2: u32, pw: usize) -> (Vec<(isize, u16)>, Vec<u32>) {
         }
     }
     disk.sort_unstable();
-    let disk: Vec<(isize, u16)> =
-        disk.iter().map(|&(d2, dy, dx)| (dy as isize * pw as isize + dx as isize, d2 as u16)).collect();
     let start = (0..=cap2 + 1)
-        .map(|d| disk.iter().position(|e| u32::from(e.1) >= d).unwrap_or(disk.len()) as u32)
+        .map(|d| disk.iter().position(|e| e.0 as u32 >= d).unwrap_or(disk.len()) as u32)
+        .collect();
+    let disk = disk
+        .iter()
+        .map(|&(d2, dy, dx)| (dy as isize * pw as isize + dx as isize, C::of(d2 as u32)))
         .collect();
     (disk, start)
 }
 
 /// Per move direction (the 8 neighbours in raster order): [`State`]'s `nbr`, `lower` and `win`.
-fn move_tables(
+fn move_tables<C: Cell>(
     r: i32,
     cap2: u32,
     pw: usize,
     win_size: (usize, usize),
-) -> ([isize; 8], [Vec<u16>; 8], [Window; 8]) {
+) -> ([isize; 8], [Vec<u16>; 8], [Window<C>; 8]) {
     let cap2 = cap2 as i32;
     let mut nbr = [0; 8];
     let mut lower: [Vec<u16>; 8] = Default::default();
-    let mut win: [Window; 8] = Default::default();
+    let mut win: [Window<C>; 8] = Default::default();
     let mut k = 0;
     for my in -1i32..=1 {
         for mx in -1i32..=1 {
@@ -172,7 +229,7 @@ fn move_tables(
     (nbr, lower, win)
 }
 
-impl Window {
+impl<C: Cell> Window<C> {
     /// The window of the move by `(mx, my)`, for `r = ⌊cap⌋` and `cap2 = ⌊cap²⌋` on a padded grid of width `pw`.
     fn new((mx, my): (i32, i32), r: i32, cap2: i32, pw: usize, (win_w, win_h): (usize, usize)) -> Self {
         let (x0, y0) = (-r + mx.min(0), -r + my.min(0));
@@ -182,8 +239,8 @@ impl Window {
                 let (dx, dy) = (x0 + wx, y0 + wy);
                 let da2 = dx * dx + dy * dy;
                 let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
-                win.da.push(if da2 <= cap2 { da2 as u16 } else { FAR_A });
-                win.db.push(if db2 <= cap2 { db2 as u16 } else { FAR16 });
+                win.da.push(if da2 <= cap2 { C::of(da2 as u32) } else { C::FAR_A });
+                win.db.push(if db2 <= cap2 { C::of(db2 as u32) } else { C::FAR });
             }
         }
         win
@@ -194,7 +251,9 @@ impl Window {
 #[derive(Default)]
 pub(crate) struct Buffers {
     flags: Vec<u8>,
+    /// `c1d2` of a state with `u16` cells, and of one with `u8` cells.
     c1d2: Vec<u16>,
+    c1d8: Vec<u8>,
     vals: [Vec<f32>; 2],
     pos: Vec<u32>,
     /// The C2 occupancy of [`State::recompute_at`].
@@ -203,7 +262,7 @@ pub(crate) struct Buffers {
 
 /// The mutable annealing state on a padded grid (pad cells are invalid, so a move can never
 /// leave the image and window scans need no bounds checks).
-pub(crate) struct State {
+pub(crate) struct State<C: Cell> {
     w: usize,
     h: usize,
     /// Left and top padding (cells); the right padding is wider so whole window rows fit.
@@ -211,9 +270,9 @@ pub(crate) struct State {
     pw: usize,
     /// `VALID | OCC2` bits per padded cell.
     flags: Vec<u8>,
-    /// Per padded cell: `EMPTY`, or the capped squared distance from the C1 point there to the
-    /// nearest C2 point (`FAR16` beyond the cap).
-    c1d2: Vec<u16>,
+    /// Per padded cell: `C::EMPTY`, or the capped squared distance from the C1 point there to the
+    /// nearest C2 point (`C::FAR` beyond the cap).
+    c1d2: Vec<C>,
     /// `[s1, |∇|]`: one array per strength over the padded cells (C1 moves read the first,
     /// C2 moves the second).
     vals: [Vec<f32>; 2],
@@ -221,16 +280,16 @@ pub(crate) struct State {
     pub(crate) pos: Vec<u32>,
     n1: usize,
     /// Offsets within the cap, sorted by squared distance: (linear delta, d²).
-    disk: Vec<(isize, u16)>,
+    disk: Vec<(isize, C)>,
     /// `start[d]` = index of the first `disk` entry with squared distance ≥ d (d ≤ cap2 + 1).
     start: Vec<u32>,
     /// Linear offset of each of the 8 move directions.
     nbr: [isize; 8],
     /// Per move direction: lower bound on the squared distance from b to C2 given the cached
-    /// one at a (`lower[dir][d²]`, index `cap2 + 1` for `FAR16`), from `|b − a| ≤ √2`.
+    /// one at a (`lower[dir][d²]`, index `cap2 + 1` for `C::FAR`), from `|b − a| ≤ √2`.
     lower: [Vec<u16>; 8],
     /// Per move direction: the C2-move window.
-    win: [Window; 8],
+    win: [Window<C>; 8],
     /// Window width (a multiple of `LANES`) and height.
     win_w: usize,
     win_h: usize,
@@ -243,14 +302,16 @@ pub(crate) struct State {
     /// A + B (initial external sums).
     ab: f64,
     /// Pending (padded cell, new d²) updates of the last C2 proposal.
-    scratch: Vec<(u32, u16)>,
+    scratch: Vec<(u32, C)>,
     /// The C2 occupancy of [`State::recompute_at`], kept for its next call.
     occ2: Vec<bool>,
     /// New d² of the C1 point of the last C1 proposal.
-    pending: u16,
+    pending: C,
+    /// The vectors of the buffers this state does not use (the other cell type's `c1d2`).
+    rest: Buffers,
 }
 
-impl State {
+impl<C: Cell> State<C> {
     /// Builds the state from (already pruned) edge maps and sanitised, scaled s1 / magnitude,
     /// with A + B = `ab` (tests: the building blocks of [`crate::relax`] one by one).
     #[cfg(test)]
@@ -284,9 +345,14 @@ impl State {
         valid: &Grid<bool>,
         term: DistanceTerm,
         lambda: f64,
-        bufs: Buffers,
+        mut bufs: Buffers,
     ) -> Self {
-        let Buffers { mut flags, mut c1d2, vals: [mut v0, mut v1], mut pos, occ2 } = bufs;
+        assert!(term.cap2 <= C::MAX_CAP2, "distance cap {} too large for the cell type", term.cap);
+        let mut c1d2 = std::mem::take(C::buf(&mut bufs));
+        let mut flags = std::mem::take(&mut bufs.flags);
+        let [mut v0, mut v1] = std::mem::take(&mut bufs.vals);
+        let mut pos = std::mem::take(&mut bufs.pos);
+        let occ2 = std::mem::take(&mut bufs.occ2);
         let (w, h) = (c1.width() as usize, c1.height() as usize);
         let r = term.cap.floor() as usize;
         let pad = r + 1;
@@ -300,7 +366,7 @@ impl State {
         flags.clear();
         flags.resize(pw * ph, 0);
         c1d2.clear();
-        c1d2.resize(pw * ph, EMPTY);
+        c1d2.resize(pw * ph, C::EMPTY);
         for v in [&mut v0, &mut v1] {
             v.clear();
             v.resize(pw * ph, 0.0);
@@ -335,7 +401,8 @@ impl State {
             ext_sum: 0.0,
             ab: 0.0,
             scratch: Vec::new(),
-            pending: 0,
+            pending: C::EMPTY,
+            rest: bufs,
         };
         st.load_strengths(valid, strengths, divisor);
         st.load_points(c1, c2);
@@ -390,7 +457,7 @@ impl State {
             let p = self.pos[k] as usize;
             let d = self.nearest(p);
             self.c1d2[p] = d;
-            e_int += self.term.value16(d);
+            e_int += self.term.value_of(d);
         }
         self.e_int = e_int;
         let mut ab = 0.0;
@@ -416,16 +483,16 @@ impl State {
         self.e_int + self.lambda * (self.ab - self.ext_sum)
     }
 
-    /// Squared distance from padded cell `p` to the nearest C2 point within the cap, or `FAR16`.
+    /// Squared distance from padded cell `p` to the nearest C2 point within the cap, or `C::FAR`.
     #[inline]
-    fn nearest(&self, p: usize) -> u16 {
+    fn nearest(&self, p: usize) -> C {
         self.nearest_from(p, 0)
     }
 
     /// [`State::nearest`] when no C2 point is known to be closer than squared distance `from`
     /// (`from ≤ cap2`): the search skips the disk entries below it.
     #[inline]
-    fn nearest_from(&self, p: usize, from: u16) -> u16 {
+    fn nearest_from(&self, p: usize, from: usize) -> C {
         nearest_in(&self.flags, &self.disk, &self.start, p, from)
     }
 
@@ -439,10 +506,7 @@ impl State {
             occ2[p as usize] = true;
         }
         let nearest = |p: usize| {
-            self.disk
-                .iter()
-                .find(|&&(off, _)| occ2[(p as isize + off) as usize])
-                .map_or(NONE, |d| u32::from(d.1))
+            self.disk.iter().find(|&&(off, _)| occ2[(p as isize + off) as usize]).map_or(NONE, |d| d.1.get())
         };
         let e_int: f64 = pos[..self.n1].iter().map(|&p| self.term.value(nearest(p as usize))).sum();
         let mut ext = 0.0;
@@ -455,14 +519,17 @@ impl State {
 
     /// The per-cell arrays, for the next frame's state.
     pub(crate) fn into_buffers(self) -> Buffers {
-        Buffers { flags: self.flags, c1d2: self.c1d2, vals: self.vals, pos: self.pos, occ2: self.occ2 }
+        let mut b =
+            Buffers { flags: self.flags, vals: self.vals, pos: self.pos, occ2: self.occ2, ..self.rest };
+        *C::buf(&mut b) = self.c1d2;
+        b
     }
 
     /// (ΔEⁱ, change of the external sum) of moving point `i` by neighbour `dir`, or `None` if the
     /// move is not allowed; ΔE = ΔEⁱ − λ·Δsum. For a C2 point the occupancy is left moved and
     /// `scratch` holds the pending updates; the caller must then [`State::commit`] or
     /// [`State::revert`].
-    #[inline]
+    #[inline(always)]
     fn propose(&mut self, i: usize, dir: usize) -> Option<(f64, f64)> {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
@@ -474,16 +541,16 @@ impl State {
         // Read the strengths first: they are likely cache misses, which then overlap the scan.
         let d_ext = f64::from(self.vals[set][b]) - f64::from(self.vals[set][a]);
         if set == 0 {
-            if self.c1d2[b] != EMPTY {
+            if self.c1d2[b] != C::EMPTY {
                 return None;
             }
             let old = self.c1d2[a];
-            // Cached values are ≤ cap2 or FAR16 (which `lower` holds at index cap2 + 1).
-            let li = if old == FAR16 { self.term.cap2 as usize + 1 } else { usize::from(old) };
-            let from = self.lower[dir][li];
+            // Cached values are ≤ cap2 or C::FAR (which `lower` holds at index cap2 + 1).
+            let li = if old == C::FAR { self.term.cap2 as usize + 1 } else { old.get() as usize };
+            let from = usize::from(self.lower[dir][li]);
             let new = nearest_in(&self.flags, &self.disk, &self.start, b, from);
             self.pending = new;
-            let d_int = self.term.value16(new) - self.term.value16(old);
+            let d_int = self.term.value_of(new) - self.term.value_of(old);
             Some((d_int, d_ext))
         } else {
             if fb & OCC2 != 0 {
@@ -515,11 +582,11 @@ impl State {
                     } else {
                         // The moved point was a nearest one; every other C2 point is at squared
                         // distance ≥ old, so search from there.
-                        nearest_in(&self.flags, &self.disk, &self.start, row + j, o)
+                        nearest_in(&self.flags, &self.disk, &self.start, row + j, o.get() as usize)
                     };
                     if new != o {
                         self.scratch.push(((row + j) as u32, new));
-                        d_int += self.term.value16(new) - self.term.value16(o);
+                        d_int += self.term.value_of(new) - self.term.value_of(o);
                     }
                 }
             }
@@ -528,12 +595,12 @@ impl State {
     }
 
     /// Applies the pending proposal of point `i` by `dir`.
-    #[inline]
+    #[inline(always)]
     fn commit(&mut self, i: usize, dir: usize, d_int: f64, d_ext: f64) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
         if i < self.n1 {
-            self.c1d2[a] = EMPTY;
+            self.c1d2[a] = C::EMPTY;
             self.c1d2[b] = self.pending;
         } else {
             for &(p, new) in &self.scratch {
@@ -546,7 +613,7 @@ impl State {
     }
 
     /// Undoes the occupancy change of a rejected C2 proposal.
-    #[inline]
+    #[inline(always)]
     fn revert(&mut self, i: usize, dir: usize) {
         if i >= self.n1 {
             let a = self.pos[i] as usize;
@@ -560,7 +627,9 @@ impl State {
     /// (point, direction) come from `moves`, the Metropolis coins from `coins`. The moves are
     /// drawn `LOOK` steps ahead and the memory they will touch is read early, so the cache
     /// misses of several moves overlap (the `LOOK` moves still pending at the end of the sweep
-    /// are dropped, so the stream is a fixed function of the seeds and the sweep lengths).
+    /// are dropped, so the stream is a fixed function of the seeds and the sweep lengths). Inlined, for
+    /// its caller's `isa::dispatch`.
+    #[inline(always)]
     pub(crate) fn sweep(
         &mut self,
         moves: &mut Xoshiro256PlusPlus,
@@ -589,7 +658,7 @@ impl State {
     }
 
     /// Reads the cells a future move of point `i` by `dir` will read (a software prefetch).
-    #[inline]
+    #[inline(always)]
     fn touch(&self, i: usize, dir: usize) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
@@ -609,7 +678,7 @@ impl State {
     }
 
     /// Tries moving point `i` by `dir` at temperature `t` (coin from `coins` if uphill).
-    #[inline]
+    #[inline(always)]
     fn attempt(&mut self, i: usize, dir: usize, rng: &mut Xoshiro256PlusPlus, t: f64) -> bool {
         let Some((d_int, d_ext)) = self.propose(i, dir) else {
             return false;
@@ -669,7 +738,7 @@ impl State {
     /// Checks every cached d² against a fresh search (tests only).
     #[cfg(test)]
     pub(crate) fn cache_consistent(&self) -> bool {
-        let occupied = self.c1d2.iter().filter(|&&d| d != EMPTY).count();
+        let occupied = self.c1d2.iter().filter(|&&d| d != C::EMPTY).count();
         occupied == self.n1
             && self.pos[..self.n1].iter().all(|&p| self.c1d2[p as usize] == self.nearest(p as usize))
     }

@@ -52,7 +52,7 @@
 
 mod anneal;
 
-use anneal::{DistanceTerm, NONE, State};
+use anneal::{Cell, DistanceTerm, NONE, State};
 use rand::SeedableRng;
 use rangeimage::{EdgeMap, Grid, ParamError, distance};
 
@@ -471,7 +471,34 @@ pub fn relax_into(
     let term = DistanceTerm::new(params.distance_cap_px());
     // Scaling fused into the state (the same values and A + B as `scaled` / `external_sum`).
     let bufs = std::mem::take(state);
-    let mut st = State::scaled(p1, p2, [s1, magnitude], div, valid, term, params.lambda, bufs);
+    let strengths = [s1, magnitude];
+    *state = if term.cap2 <= <u8 as Cell>::MAX_CAP2 {
+        let st = State::<u8>::scaled(p1, p2, strengths, div, valid, term, params.lambda, bufs);
+        anneal(st, params, seed, (initial, best), &mut info, out)
+    } else {
+        let st = State::<u16>::scaled(p1, p2, strengths, div, valid, term, params.lambda, bufs);
+        anneal(st, params, seed, (initial, best), &mut info, out)
+    };
+    if params.support_px > 0.0 {
+        within_into(&out.c2, p1, params.support_px, supported);
+    } else {
+        supported.copy_from(&out.c2);
+    }
+    info.unsupported_c2 = count(&out.c2) - count(supported);
+    union_into(&out.c1, supported, &mut out.edges);
+    info
+}
+
+/// The annealing of [`relax_into`] from the built state `st`: its statistics into `info`, the best positions
+/// (`best`; `initial` holds the starting ones) into `out.c1` and `out.c2`; returns the state's buffers.
+fn anneal<C: Cell>(
+    mut st: State<C>,
+    params: &Params,
+    seed: u64,
+    (initial, best): (&mut Vec<u32>, &mut Vec<u32>),
+    info: &mut Info,
+    out: &mut Relaxed,
+) -> anneal::Buffers {
     initial.clear();
     initial.reserve(st.pos.capacity());
     initial.extend_from_slice(&st.pos);
@@ -499,7 +526,12 @@ pub fn relax_into(
         let mut t = t0;
         let mut best_e = st.energy();
         for _ in 0..params.max_sweeps {
-            let acc = st.sweep(&mut rng, &mut coins, t, n);
+            // Compiled for the best instruction set of this CPU (the window scans several cells at a time; the
+            // same decisions and sums on every one).
+            let acc = isa::dispatch(
+                #[inline(always)]
+                || st.sweep(&mut rng, &mut coins, t, n),
+            );
             info.sweeps += 1;
             info.moves_tried += n as u64;
             info.moves_accepted += acc;
@@ -527,15 +559,7 @@ pub fn relax_into(
         if info.moves_tried > 0 { info.moves_accepted as f64 / info.moves_tried as f64 } else { 0.0 };
     tracing::debug!(?info, "relaxed");
     st.maps_into(best, &mut out.c1, &mut out.c2);
-    *state = st.into_buffers();
-    if params.support_px > 0.0 {
-        within_into(&out.c2, p1, params.support_px, supported);
-    } else {
-        supported.copy_from(&out.c2);
-    }
-    info.unsupported_c2 = count(&out.c2) - count(supported);
-    union_into(&out.c1, supported, &mut out.edges);
-    info
+    st.into_buffers()
 }
 
 #[cfg(test)]
@@ -602,7 +626,7 @@ mod tests {
     }
 
     /// The incrementally kept energies of `st` equal a recomputation at its current positions.
-    fn assert_energy_is_recomputed(st: &mut State, lambda: f64) {
+    fn assert_energy_is_recomputed<C: Cell>(st: &mut State<C>, lambda: f64) {
         let pos = st.pos.clone();
         let (ei, ee) = st.recompute_at(&pos);
         assert_relative_eq!(st.e_int, ei, epsilon = 1e-9, max_relative = 1e-6);
@@ -620,7 +644,7 @@ mod tests {
             let magn = scaled(&c.mag, &p2, true);
             let ab = external_sum(&p1, &s1n, &p2, &magn);
             let term = DistanceTerm::new(params.distance_cap_px());
-            let mut st = State::new(&p1, &p2, &s1n, &magn, &c.valid, term, params.lambda, ab);
+            let mut st = State::<u8>::new(&p1, &p2, &s1n, &magn, &c.valid, term, params.lambda, ab);
             assert!(st.len() > 50, "seed {seed}: too few points ({})", st.len());
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
             let mut accepted = 0;
@@ -677,7 +701,7 @@ mod tests {
             let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
             let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
             let term = DistanceTerm::new(params.distance_cap_px());
-            let mut st = State::scaled(
+            let mut st = State::<u16>::scaled(
                 &p1,
                 &p2,
                 [&c.s1, &c.mag],
@@ -705,6 +729,69 @@ mod tests {
     }
 
     #[test]
+    fn byte_cells_anneal_as_u16_cells() {
+        // The `u8` cells (caps up to √252 px) against the general `u16` ones: the same moves, decisions and sums.
+        for seed in 0..6u64 {
+            let c = random_case(80, 60, 300 + seed);
+            let t_d = [1.0, 2.5, 4.0, 9.0, 12.9, 14.87][seed as usize];
+            let params = Params { t_d_px: t_d, lambda: 0.6, ..Params::default() };
+            let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
+            let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
+            let term = DistanceTerm::new(params.distance_cap_px());
+            assert!(term.cap2 <= <u8 as Cell>::MAX_CAP2, "seed {seed}: cap {} too large for bytes", term.cap);
+            let strengths = [&c.s1, &c.mag];
+            let mut a = State::<u8>::scaled(
+                &p1,
+                &p2,
+                strengths,
+                div,
+                &c.valid,
+                term.clone(),
+                0.6,
+                Default::default(),
+            );
+            let mut b =
+                State::<u16>::scaled(&p1, &p2, strengths, div, &c.valid, term, 0.6, Default::default());
+            let n = a.len();
+            assert!(n > 50, "seed {seed}: too few points ({n})");
+            let rngs =
+                || (Xoshiro256PlusPlus::seed_from_u64(seed), Xoshiro256PlusPlus::seed_from_u64(seed + 9));
+            let ((mut ma, mut ca), (mut mb, mut cb)) = (rngs(), rngs());
+            assert_eq!(
+                a.mean_uphill(&mut ma, 500).map(f64::to_bits),
+                b.mean_uphill(&mut mb, 500).map(f64::to_bits)
+            );
+            for t in [5.0, 2.0, 1.0, 0.3, 0.1, 0.01, 0.0] {
+                let acc = a.sweep(&mut ma, &mut ca, t, n);
+                assert_eq!(acc, b.sweep(&mut mb, &mut cb, t, n), "seed {seed}, t {t}");
+                assert_eq!(a.pos, b.pos, "seed {seed}, t {t}");
+                assert_eq!(a.e_int.to_bits(), b.e_int.to_bits(), "seed {seed}, t {t}");
+                assert_eq!(a.energy().to_bits(), b.energy().to_bits(), "seed {seed}, t {t}");
+                assert!(a.cache_consistent(), "seed {seed}, t {t}: stale byte cache");
+            }
+            let pos = a.pos.clone();
+            assert_eq!(a.recompute_at(&pos), b.recompute_at(&pos));
+        }
+    }
+
+    #[test]
+    fn every_instruction_set_gives_the_same_relaxation() {
+        // Byte cells (the default cap) and u16 cells (a cap over √252 px).
+        for (seed, t_d) in [(0u64, 9.0), (1, 3.0), (2, 16.0)] {
+            let c = random_case(90, 60, 500 + seed);
+            let params = Params { t_d_px: t_d, ..Params::default() };
+            let run = || relax(&c.input(), &params, seed);
+            let want = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+            assert!(want.1.moves_accepted > 0, "seed {seed}: nothing moved");
+            for other in isa::Isa::available() {
+                let got = isa::with_isa(other, run).expect("available");
+                assert_eq!(got.0, want.0, "seed {seed}, {other:?}");
+                assert_eq!(format!("{:?}", got.1), format!("{:?}", want.1), "seed {seed}, {other:?}");
+            }
+        }
+    }
+
+    #[test]
     fn fused_scaling_matches_scaled_grids() {
         for (seed, normalize) in [(1u64, true), (2, false), (3, true)] {
             let mut c = random_case(50, 40, seed);
@@ -713,9 +800,18 @@ mod tests {
             let (s1n, magn) = (scaled(&c.s1, &p1, normalize), scaled(&c.mag, &p2, normalize));
             let ab = external_sum(&p1, &s1n, &p2, &magn);
             let term = || DistanceTerm::new(4.0);
-            let a = State::new(&p1, &p2, &s1n, &magn, &c.valid, term(), 1.0, ab);
+            let a = State::<u8>::new(&p1, &p2, &s1n, &magn, &c.valid, term(), 1.0, ab);
             let div = [divisor(&c.s1, &p1, normalize), divisor(&c.mag, &p2, normalize)];
-            let b = State::scaled(&p1, &p2, [&c.s1, &c.mag], div, &c.valid, term(), 1.0, Default::default());
+            let b = State::<u8>::scaled(
+                &p1,
+                &p2,
+                [&c.s1, &c.mag],
+                div,
+                &c.valid,
+                term(),
+                1.0,
+                Default::default(),
+            );
             assert_eq!(a.strengths(), b.strengths(), "seed {seed}");
             assert_eq!(a.pos, b.pos);
             assert_eq!(a.e_int, b.e_int);
