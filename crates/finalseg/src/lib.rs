@@ -49,7 +49,7 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    (the planes meet at the border: a bend, not a step) merge whatever the support, if their
 ///    normals differ by at most `bend_max_angle_deg` and one plane fits both within
 ///    `merge_max_residual` (RMS): one wall that the depth encoding bends.
-/// 5. Border refinement (`refine_passes` > 0): a border pixel farther than 2.5 noise scales
+/// 5. Border refinement (`refine_passes` > 0): a border pixel farther than one noise scale
 ///    from its own region's plane moves to the adjacent region whose plane fits it better (a
 ///    Potts energy, so noise does not fray the border; within the fill limit), up to
 ///    `refine_passes` passes of one pixel each, every pass decided from the previous one: a
@@ -480,6 +480,33 @@ mod tests {
             assert!(column(&base, x).iter().all(|&l| l == 2), "x = {x} moves to the right plane");
         }
         for x in [0, 29, 30] {
+            assert!(column(&base, x).iter().all(|&l| l == 1), "x = {x} stays on the left plane");
+        }
+    }
+
+    /// A shallow crease at x = 30 (slopes 0.5 and 1.5 per pixel, 30° apart in Grid units, with a ±0.3 ripple) and
+    /// the edge line 6 px past it (x = 36): the left region holds five columns of the right plane, which tilt its
+    /// plane and inflate its RMS enough that they lie within 2.5 of its noise scales. Refinement still gives
+    /// them back to the plane they lie on, and the moved border is straight.
+    #[test]
+    fn refinement_returns_a_band_leaked_past_a_shallow_crease() {
+        let ripple = |x: u32, y: u32| if (x * 3 + y * 5) % 4 < 2 { 0.3 } else { -0.3 };
+        let range = Grid::from_fn(72, 40, |x, y| {
+            let v = if x <= 30 { 100.0 + 0.5 * x as f32 } else { 115.0 + 1.5 * (x as f32 - 30.0) };
+            v + ripple(x, y)
+        });
+        let edges = Grid::from_fn(72, 40, |x, _| x == 36);
+        let base = Params { min_region_px: 10, ..Params::default() };
+        let column = |p: &Params, x: u32| {
+            let (labels, _) = segment(&range, &Camera::Grid, &edges, None, p);
+            (0..40).map(|y| labels[(x, y)]).collect::<Vec<_>>()
+        };
+        let off = Params { refine_passes: 0, ..base.clone() };
+        assert!(column(&off, 33).iter().all(|&l| l == 1), "without refinement the leaked band stays left");
+        for x in 32..=35 {
+            assert!(column(&base, x).iter().all(|&l| l == 2), "x = {x} moves to the right plane");
+        }
+        for x in [0, 20, 29] {
             assert!(column(&base, x).iter().all(|&l| l == 1), "x = {x} stays on the left plane");
         }
     }

@@ -63,7 +63,7 @@ pub struct Params {
     /// a plane fits only roughly (8-bit staircases, depth encodings that bend planes) keeps its pixels.
     pub fill_rms_ratio: f64,
     /// Passes of border refinement after the merge: a pixel on a region border that its own plane
-    /// does not explain (farther than 2.5 noise scales) moves to the adjacent region whose plane
+    /// does not explain (farther than one noise scale) moves to the adjacent region whose plane
     /// fits it better (a Potts energy: squared distance in noise units plus a cost per disagreeing
     /// neighbour; within the fill limit). A border moves at most one pixel per pass; 0 = off
     /// (borders stay where growth and edges put them, the specification taken literally).
