@@ -447,6 +447,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "segment.bend_max_gap",
         "Regions mode: a bend needs the border pixels' mean distance to the other region's plane < this × the larger region RMS.",
     ),
+    (
+        "segment.bend_fit_ratio",
+        "Regions mode: a sharper bend still merges if the joint plane fits each region within this × the larger region RMS (0 = off).",
+    ),
 ];
 
 /// The comment of `key` (`table.key`) in [`KEY_DOCS`].

@@ -48,7 +48,9 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    closer to each other's plane than `bend_max_gap` times the larger of their RMS residuals
 ///    (the planes meet at the border: a bend, not a step) merge whatever the support, if their
 ///    normals differ by at most `bend_max_angle_deg` and one plane fits both within
-///    `merge_max_residual` (RMS): one wall that the depth encoding bends.
+///    `merge_max_residual` (RMS): one wall that the depth encoding bends. Normals farther apart still
+///    merge if that joint plane fits each region within `bend_fit_ratio` times the larger of their
+///    RMS residuals: a thin piece (a terrace of a quantised slope) whose own normal means nothing.
 /// 5. Border refinement (`refine_passes` > 0): a border pixel farther than one noise scale
 ///    from its own region's plane moves to the adjacent region whose plane fits it better (a
 ///    Potts energy, so noise does not fray the border; within the fill limit), up to
@@ -772,8 +774,41 @@ mod tests {
         assert_eq!(count(0.0, &off), 2, "without bend merges the supported border stays");
         assert_eq!(count(0.0, &regions_mode()), 1, "a bend: merged");
         assert_eq!(count(1.0, &regions_mode()), 2, "a step: kept");
-        let narrow = Params { bend_max_angle_deg: 3.0, ..regions_mode() };
+        let narrow = Params { bend_max_angle_deg: 3.0, bend_fit_ratio: 0.0, ..regions_mode() };
         assert_eq!(count(0.0, &narrow), 2, "a bend sharper than bend_max_angle_deg: kept");
+        let fits = Params { bend_fit_ratio: 2.0, ..narrow };
+        assert_eq!(count(0.0, &fits), 1, "sharper, but one plane fits both within twice their RMS: merged");
+    }
+
+    #[test]
+    fn regions_mode_merges_a_thin_strip_whose_own_normal_is_unreliable() {
+        // One noisy plane (slope 0.5 per pixel, noise RMS about 1) that region growing cut into a 1-px strip at
+        // x = 18 and the rest on either side, with edge lines beside the strip. The strip's own plane is x = 18
+        // (63° off: its points span no width), but the plane through the strip and a neighbour fits the
+        // strip as well as the neighbour's own plane fits it.
+        let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.75 - 1.5;
+        let range = Grid::from_fn(40, 30, |x, y| 100.0 + 0.5 * x as f32 + noise(x, y));
+        let edges = Grid::from_fn(40, 30, |x, _| x == 17 || x == 19);
+        let rg = Grid::from_fn(40, 30, |x, _| match x {
+            0..18 => 1u32,
+            18 => 2,
+            _ => 3,
+        });
+        let count = |p: &Params| segment(&range, &Camera::Grid, &edges, Some(&rg), p).1.len();
+        let p = Params { min_region_px: 10, ..regions_mode() };
+        let angle_only = Params { bend_fit_ratio: 0.0, ..p.clone() };
+        assert_eq!(count(&angle_only), 3, "the strip's normal fails the angle test");
+        assert_eq!(count(&p), 1, "the joint plane fits the strip: merged");
+        // Right of the strip a second plane, 37° steeper (a crease at x = 18.5): the strip joins the left
+        // plane only.
+        let creased = Grid::from_fn(40, 30, |x, y| {
+            let v = if x <= 18 { 100.0 + 0.5 * x as f32 } else { 109.25 + 2.0 * (x as f32 - 18.5) };
+            v + noise(x, y)
+        });
+        let (labels, regions) = segment(&creased, &Camera::Grid, &edges, Some(&rg), &p);
+        assert_eq!(regions.len(), 2, "a crease is not a strip");
+        assert_eq!(labels[(18, 10)], labels[(5, 10)]);
+        assert_ne!(labels[(30, 10)], labels[(5, 10)]);
     }
 
     #[test]
@@ -792,7 +827,8 @@ mod tests {
         assert!(Params { merge_max_angle_deg: -1.0, ..p.clone() }.validate().is_err());
         assert!(Params { merge_max_residual: f64::NAN, ..p.clone() }.validate().is_err());
         assert!(Params { bend_max_angle_deg: 91.0, ..p.clone() }.validate().is_err());
-        assert!(Params { bend_max_gap: -1.0, ..p }.validate().is_err());
+        assert!(Params { bend_max_gap: -1.0, ..p.clone() }.validate().is_err());
+        assert!(Params { bend_fit_ratio: -1.0, ..p }.validate().is_err());
     }
 
     /// A random scene: tilted planes in vertical bands with noise and NaN holes, random edge pixels plus

@@ -49,6 +49,8 @@ struct PlaneTest {
     k2: f64,
     /// cos of `bend_max_angle_deg`, or `None` (bend merges off).
     cos_bend: Option<f64>,
+    /// `bend_fit_ratio²`.
+    fit2: f64,
 }
 
 /// Union-find merging of adjacent components of `pieces` over borders weakly supported by
@@ -73,6 +75,7 @@ pub(crate) fn merge_unsupported(
         r2: params.merge_max_residual * params.merge_max_residual,
         k2: params.within_max_rms_ratio * params.within_max_rms_ratio,
         cos_bend: bends.then(|| params.bend_max_angle_deg.to_radians().cos()),
+        fit2: params.bend_fit_ratio * params.bend_fit_ratio,
     };
     let merges = merge_fixpoint(candidates, &test, parent, &mut pieces.moments, &mut pieces.planes, scene);
     tracing::debug!(pairs = borders.len(), candidates = candidates.pairs.len(), merges, "merged");
@@ -233,17 +236,26 @@ impl PlaneTest {
         weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12)
     }
 
-    /// Whether groups a and b, whose border is continuous, may merge as two sides of a bend:
-    /// normals within `bend_max_angle_deg`, and one plane through both within `merge_max_residual`.
+    /// Whether groups a and b, whose border is continuous, may merge as two sides of a bend: one
+    /// plane through both within `merge_max_residual`, and normals within `bend_max_angle_deg` or
+    /// that joint plane explaining each group within `bend_fit_ratio` times the larger of their RMS.
     fn bend(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, scene: &Scene<'_>) -> bool {
         let Some(cos_bend) = self.cos_bend else { return false };
         let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
-        if dot.abs() < cos_bend {
+        let within_angle = dot.abs() >= cos_bend;
+        if !within_angle && self.fit2 == 0.0 {
             return false;
         }
         let mut joint = *ma;
         joint.merge(mb);
-        let rms = fit_plane(&joint, scene.camera).rms;
-        rms * rms <= self.r2
+        let pj = fit_plane(&joint, scene.camera);
+        if pj.rms * pj.rms > self.r2 {
+            return false;
+        }
+        // A sharper bend: each group's own normal is unreliable (a thin terrace of a quantised slope)
+        // when the joint plane explains it nearly as well as its own plane does.
+        let scatter = pa.rms.max(pb.rms);
+        let limit = self.fit2 * scatter * scatter;
+        within_angle || (mean_sq_residual(ma, &pj) <= limit && mean_sq_residual(mb, &pj) <= limit)
     }
 }

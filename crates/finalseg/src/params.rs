@@ -79,6 +79,11 @@ pub struct Params {
     /// pixels of two regions to each other's plane below this multiple of the larger of the two
     /// regions' RMS distances to their own planes (their scatter: noise, quantisation, bending).
     pub bend_max_gap: f64,
+    /// `regions` mode, `bend_max_angle_deg` > 0: a bend whose normals differ by more than
+    /// `bend_max_angle_deg` still merges if the joint plane explains each of the two regions within
+    /// this multiple of the larger of their own RMS residuals (the regions' own normals are unreliable:
+    /// thin terraces of a quantised slope); 0 = off.
+    pub bend_fit_ratio: f64,
 }
 
 impl Default for Params {
@@ -98,6 +103,7 @@ impl Default for Params {
             refine_passes: 10,
             bend_max_angle_deg: 30.0,
             bend_max_gap: 1.5,
+            bend_fit_ratio: 2.0,
         }
     }
 }
@@ -117,6 +123,7 @@ impl Params {
         ParamError::at_least("segment.merge_max_residual", self.merge_max_residual, 0.0)?;
         ParamError::in_range("segment.bend_max_angle_deg", self.bend_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
+        ParamError::at_least("segment.bend_fit_ratio", self.bend_fit_ratio, 0.0)?;
         Ok(())
     }
 }
