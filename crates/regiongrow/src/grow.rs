@@ -869,9 +869,13 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
         return true;
     }
     let (w, h, pw) = (ctx.w, ctx.h, ctx.pw);
-    let (x, y) = (c % pw - 1, c / pw - 1);
-    if x < radius || y < radius || x + radius >= w || y + radius >= h {
-        return false;
+    // A window of radius 1 reaching out of the image holds a frame pixel, which is [`BLOCKED`] during seeding and
+    // fails the label test below: only wider windows need the bounds test (and its two divisions).
+    if radius > 1 {
+        let (x, y) = (c % pw - 1, c / pw - 1);
+        if x < radius || y < radius || x + radius >= w || y + radius >= h {
+            return false;
+        }
     }
     let paper = params.mode == Mode::Paper;
     let cos_max = f64::from(params.max_angle_deg).to_radians().cos();
@@ -879,8 +883,8 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
     let max_dk = params.max_k_diff;
     let kc = ctx.k[c];
     let plane = (!paper).then(|| Plane::through(point_of(&ctx.geo[c]), normal_of(&ctx.geo[c])));
-    for yy in y - radius..=y + radius {
-        let row = ctx.pad(x - radius, yy);
+    for dy in 0..=2 * radius {
+        let row = c + dy * pw - radius * (pw + 1);
         for j in row..=row + 2 * radius {
             if labels[j] != 0 {
                 return false;
@@ -931,9 +935,17 @@ fn fill(
     // Free = unlabelled with a 3D point; the frame has none, so a free pixel's neighbours exist.
     let free = |labels: &[u32], j: usize| labels[j] == 0 && geo[j][0].is_finite();
     queue.clear();
-    for i in 0..labels.len() {
-        if free(labels, i) && offs.iter().any(|&o| labels[i.wrapping_add_signed(o)] != 0) {
-            queue.push(i as u32);
+    // The free pixels next to a region, in index order (the frame is never free); the labels are tested before the
+    // 3D point, so the points of pixels in unlabelled areas are not read.
+    let pw = ctx.pw;
+    for row in (pw + 1..).step_by(pw).take(ctx.h) {
+        for i in row..row + ctx.w {
+            if labels[i] == 0
+                && (labels[i - 1] | labels[i - pw] | labels[i + 1] | labels[i + pw]) != 0
+                && geo[i][0].is_finite()
+            {
+                queue.push(i as u32);
+            }
         }
     }
     let mut filled = 0;

@@ -247,6 +247,16 @@ impl<C: Cell> Window<C> {
     }
 }
 
+/// Sets the pad cells of a padded grid (image `w × h` at column and row `pad`, padded width `pw`) to 0.
+fn zero_pad(v: &mut [f32], (w, h): (usize, usize), pad: usize, pw: usize) {
+    v[..pad * pw].fill(0.0);
+    v[(pad + h) * pw..].fill(0.0);
+    for row in v[pad * pw..(pad + h) * pw].chunks_exact_mut(pw) {
+        row[..pad].fill(0.0);
+        row[pad + w..].fill(0.0);
+    }
+}
+
 /// The per-cell arrays of a [`State`], kept between frames (see [`crate::Scratch`]).
 #[derive(Default)]
 pub(crate) struct Buffers {
@@ -368,8 +378,14 @@ impl<C: Cell> State<C> {
         c1d2.clear();
         c1d2.resize(pw * ph, C::EMPTY);
         for v in [&mut v0, &mut v1] {
-            v.clear();
-            v.resize(pw * ph, 0.0);
+            if v.len() == pw * ph {
+                // The previous frame's memory: `load_strengths` rewrites every image cell, so only the pad cells are
+                // set (to the 0 a fresh vector holds).
+                zero_pad(v, (w, h), pad, pw);
+            } else {
+                v.clear();
+                v.resize(pw * ph, 0.0);
+            }
         }
         // Room for every point a frame of this size can have (C1 and C2 each at most one per pixel), so a later
         // frame with more edge points reuses the memory (reserved memory is touched only as far as used).
@@ -404,13 +420,19 @@ impl<C: Cell> State<C> {
             pending: C::EMPTY,
             rest: bufs,
         };
-        st.load_strengths(valid, strengths, divisor);
+        // Compiled for the best instruction set of this CPU (the divisions run several at a time; the same quotients).
+        isa::dispatch(
+            #[inline(always)]
+            || st.load_strengths(valid, strengths, divisor),
+        );
         st.load_points(c1, c2);
         st.init_energies();
         st
     }
 
-    /// Fills the flags with the valid cells and `vals` with the strengths (see [`State::scaled`]).
+    /// Fills the flags with the valid cells and `vals` with the strengths (see [`State::scaled`]). Inlined, for its
+    /// caller's `isa::dispatch`.
+    #[inline(always)]
     fn load_strengths(&mut self, valid: &Grid<bool>, [s1, mag]: [&Grid<f32>; 2], divisor: [f64; 2]) {
         let w = self.w;
         for (y, ((vrow, srow), mrow)) in valid
@@ -753,6 +775,25 @@ impl<C: Cell> State<C> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `zero_pad` sets exactly the pad cells of a reused grid (the cells a fresh, zeroed grid has and
+    /// `load_strengths` does not write).
+    #[test]
+    fn zero_pad_sets_exactly_the_pad_cells() {
+        for (w, h, pad, extra) in
+            [(1usize, 1usize, 1usize, 0usize), (5, 3, 2, 7), (7, 4, 11, 21), (3, 9, 1, 1)]
+        {
+            let pw = w + 2 * pad + extra;
+            let ph = h + 2 * pad;
+            let mut v = vec![1.0f32; pw * ph];
+            zero_pad(&mut v, (w, h), pad, pw);
+            for (i, &x) in v.iter().enumerate() {
+                let (c, r) = (i % pw, i / pw);
+                let image = (pad..pad + w).contains(&c) && (pad..pad + h).contains(&r);
+                assert_eq!(x, if image { 1.0 } else { 0.0 }, "w {w} h {h} pad {pad} at ({c}, {r})");
+            }
+        }
+    }
     use rand::SeedableRng;
 
     #[test]
