@@ -386,11 +386,14 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
         let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
         let mut x = 0;
         if !eight && !below.is_empty() {
-            // Skip runs of 16 pixels equal to their right and lower neighbours (no pairs there).
+            // Skip runs of 16 pixels none of which forms a pair with its right or lower neighbour (two
+            // different nonzero labels), the test of `scan` evaluated without branches.
             while x + CHUNK < width {
                 let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
-                let diff = r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | (p ^ q) | (p ^ s));
-                if diff != 0 {
+                let pair = |p: u32, q: u32| u32::from(p != 0) & u32::from(q != 0) & u32::from(p != q);
+                let any =
+                    r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | pair(p, q) | pair(p, s));
+                if any != 0 {
                     for xx in x..x + CHUNK {
                         scan(row, below, xx, pairs);
                     }
@@ -550,6 +553,51 @@ mod tests {
             }
         }
         (stats, n_merged, n_passes)
+    }
+
+    /// The chunked pair scan equals a pixel-by-pixel scan of every neighbour, on random label images of
+    /// patches (so that chunks are skipped) with scattered zeros and other labels, 4- and 8-connected.
+    #[test]
+    fn adjacent_pairs_match_a_pixelwise_scan() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(18);
+        let mut pairs = Vec::new();
+        for case in 0..400 {
+            let (w, h) = (rng.random_range(1..90usize), rng.random_range(1..30usize));
+            let (bw, bh) = (rng.random_range(1..40usize), rng.random_range(1..12usize));
+            let noise = [0.0, 0.003, 0.03, 0.3][case % 4];
+            let labels: Vec<u32> = (0..w * h)
+                .map(|i| {
+                    let block = ((i % w) / bw + 3 * ((i / w) / bh)) as u32 % 5;
+                    if rng.random_bool(noise) { rng.random_range(0..7) } else { block }
+                })
+                .collect();
+            for eight in [false, true] {
+                adjacent_pairs_into(&labels, w, eight, &mut pairs);
+                let mut want = std::collections::BTreeSet::new();
+                let offsets: &[(i64, i64)] =
+                    if eight { &[(1, 0), (0, 1), (1, 1), (-1, 1)] } else { &[(1, 0), (0, 1)] };
+                for y in 0..h as i64 {
+                    for x in 0..w as i64 {
+                        for &(dx, dy) in offsets {
+                            let (nx, ny) = (x + dx, y + dy);
+                            if nx < 0 || nx >= w as i64 || ny >= h as i64 {
+                                continue;
+                            }
+                            let (a, b) =
+                                (labels[(y * w as i64 + x) as usize], labels[(ny * w as i64 + nx) as usize]);
+                            if a != 0 && b != 0 && a != b {
+                                want.insert((a.min(b), a.max(b)));
+                            }
+                        }
+                    }
+                }
+                assert_eq!(
+                    pairs,
+                    want.into_iter().collect::<Vec<_>>(),
+                    "case {case} ({w}×{h}, eight: {eight})"
+                );
+            }
+        }
     }
 
     /// Random fragmentations of noisy scenes, every mode and merge rule, one `MergeBufs` for all: the same
