@@ -775,6 +775,7 @@ impl<C: Cell> State<C> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
 
     /// `zero_pad` sets exactly the pad cells of a reused grid (the cells a fresh, zeroed grid has and
     /// `load_strengths` does not write).
@@ -794,7 +795,6 @@ mod tests {
             }
         }
     }
-    use rand::SeedableRng;
 
     #[test]
     fn metropolis_shortcut_matches_exp() {

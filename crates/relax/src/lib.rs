@@ -583,16 +583,20 @@ fn anneal<C: Cell>(
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use rand::{RngExt, rngs::Xoshiro256PlusPlus};
+
     /// `pack_bits` equals one shift per flag on random rows of every length up to 200.
     #[test]
     fn pack_bits_matches_the_bitwise_packing() {
-        use rand::{RngExt, SeedableRng};
-        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(5);
+        use rand::SeedableRng;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
         for len in 1..=200usize {
             for density in [0.05, 0.5, 0.95] {
                 let row: Vec<bool> = (0..len).map(|_| rng.random_bool(density)).collect();
                 let mut got = vec![0u64; len.div_ceil(64)];
-                super::pack_bits(&row, &mut got);
+                pack_bits(&row, &mut got);
                 let want: Vec<u64> = row
                     .chunks(64)
                     .map(|c| c.iter().enumerate().fold(0u64, |acc, (j, &b)| acc | (u64::from(b) << j)))
@@ -601,10 +605,6 @@ mod tests {
             }
         }
     }
-
-    use super::*;
-    use approx::assert_relative_eq;
-    use rand::{RngExt, rngs::Xoshiro256PlusPlus};
 
     /// A random test case: C1 = a few thick random segments, C2 = a jittered, gappy copy plus
     /// clutter, about 5% invalid pixels, random strengths.
