@@ -138,3 +138,49 @@ fn the_result_does_not_depend_on_the_depth_unit() {
     let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
     assert!(differ * 1000 < a.len(), "{differ} of {} labels differ between metres and centimetres", a.len());
 }
+
+/// A noise-free rendered room as a depth sensor without noise would store it: floor, back wall, two side walls
+/// and a slanted panel, seen by a 640 × 480 pinhole camera, depth in metres rounded to whole millimetres.
+fn noise_free_room() -> (rangeimage::RangeImage, rangeimage::Camera) {
+    let (fx, cx, cy) = (525.0, 319.5, 239.5);
+    // Planes n · p = d (y down), and the pixel box a plane is limited to.
+    let planes: [([f64; 3], f64, Option<[f64; 4]>); 5] = [
+        ([0.0, -1.0, 0.0], -1.2, None),
+        ([0.0, 0.0, 1.0], 4.0, None),
+        ([1.0, 0.0, 0.0], 1.8, None),
+        ([-1.0, 0.0, 0.0], 1.6, None),
+        ([0.3, 0.0, 1.0], 2.6, Some([200.0, 100.0, 420.0, 300.0])),
+    ];
+    let range = rangeimage::Grid::from_fn(640, 480, |u, v| {
+        let (u, v) = (f64::from(u), f64::from(v));
+        let ray = [(u - cx) / fx, (v - cy) / fx, 1.0];
+        let mut z = f64::INFINITY;
+        for (n, d, bounds) in &planes {
+            let t = d / (n[0] * ray[0] + n[1] * ray[1] + n[2] * ray[2]);
+            let inside = bounds.is_none_or(|[x0, y0, x1, y1]| u > x0 && u < x1 && v > y0 && v < y1);
+            if t > 0.3 && t < 8.0 && inside {
+                z = z.min(t);
+            }
+        }
+        if z.is_finite() { ((z * 1000.0).round() / 1000.0) as f32 } else { f32::NAN }
+    });
+    (range, rangeimage::Camera::Pinhole { fx, fy: fx, cx, cy, depth_scale: 1.0 })
+}
+
+#[test]
+fn noise_free_quantised_depth_is_segmented_into_its_planes() {
+    // Most 5 × 5 windows of 1-mm-rounded noise-free depth hold one value, so the noise estimate reads ~1e-11 m.
+    // Scaled by it, every 1 mm step became a jump of thousands of units and region growing grew one region (3
+    // final regions). The working units take at least the rounding's own σ, 1 mm / √12.
+    let (range, camera) = noise_free_room();
+    let out = rangeseg::segment(&range, &camera, &Config::default());
+    let units = out.units.expect("units of the frame");
+    let rounding = 0.001 / 12f64.sqrt();
+    assert!(units.factor <= 1.01 * rangeseg::units::PINHOLE_SIGMA / rounding, "{units:?}");
+    let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
+    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
+    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
+    for p in &big {
+        assert!(p.rms < 0.002, "each one plane: RMS {} m", p.rms);
+    }
+}

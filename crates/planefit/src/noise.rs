@@ -73,6 +73,39 @@ pub fn estimate(range: &rangeimage::RangeImage) -> NoiseEstimate {
     NoiseEstimate { sigma, step, windows }
 }
 
+/// The smallest positive absolute difference between horizontal or vertical neighbours that both hold data,
+/// over every `stride`-th row (and the row below it); `None` if there is none. A lower bound of the
+/// quantisation step that costs one pass over `1 / stride` of the image.
+///
+/// # Panics
+/// If `stride` is 0.
+#[must_use]
+pub fn smallest_difference(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
+    assert!(stride > 0, "stride must be positive");
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let data = range.as_slice();
+    let mut min = f64::INFINITY;
+    let mut keep = |a: f32, b: f32| {
+        let d = (f64::from(a) - f64::from(b)).abs();
+        if d > 0.0 && d < min {
+            min = d;
+        }
+    };
+    for y in (0..h).step_by(stride) {
+        let row = &data[y * w..(y + 1) * w];
+        for pair in row.windows(2) {
+            keep(pair[0], pair[1]);
+        }
+        if y + 1 < h {
+            for (&a, &b) in row.iter().zip(&data[(y + 1) * w..(y + 2) * w]) {
+                keep(a, b);
+            }
+        }
+    }
+    // NaN differences compare false above, so they never enter.
+    min.is_finite().then_some(min)
+}
+
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
 /// row and column (`stride` = 1: every window, as [`estimate`]); NaN when fewer than 20 windows hold data.
 ///
@@ -264,6 +297,17 @@ mod tests {
     use rand::rngs::Xoshiro256PlusPlus;
     use rand::{RngExt, SeedableRng};
     use rangeimage::{Grid, RangeImage};
+
+    #[test]
+    fn smallest_difference_reads_the_finest_step_between_neighbours() {
+        // Steps of 0.5 down the rows, 2 across the columns, a no-data pixel (its differences never count).
+        let mut img: RangeImage = Grid::from_fn(9, 8, |x, y| (10.0 + 2.0 * x as f64 + 0.5 * y as f64) as f32);
+        img[(3, 3)] = f32::NAN;
+        assert_eq!(smallest_difference(&img, 1), Some(0.5));
+        assert_eq!(smallest_difference(&img, 3), Some(0.5), "every 3rd row and the row below it");
+        assert_eq!(smallest_difference(&Grid::new(9, 8, 4.0f32), 1), None, "constant depth");
+        assert_eq!(smallest_difference(&Grid::new(9, 8, f32::NAN), 1), None, "no data");
+    }
 
     /// Unit-variance Gaussian (Irwin–Hall sum of 12 uniforms).
     fn gauss(rng: &mut Xoshiro256PlusPlus) -> f64 {
