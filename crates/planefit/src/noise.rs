@@ -73,37 +73,56 @@ pub fn estimate(range: &rangeimage::RangeImage) -> NoiseEstimate {
     NoiseEstimate { sigma, step, windows }
 }
 
-/// The smallest positive absolute difference between horizontal or vertical neighbours that both hold data,
-/// over every `stride`-th row (and the row below it); `None` if there is none. A lower bound of the
-/// quantisation step that costs one pass over `1 / stride` of the image.
+/// The quantisation step of depth as [`estimate`] finds it, but read only from every `stride`-th row (and the
+/// row below it) and only tried at the smallest nonzero difference between neighbours: that difference if at
+/// least 2 % of the nonzero differences equal it and 90 % are whole multiples of it, else `None` (continuous
+/// depth, too few differences, or a step that is not the smallest difference). Two passes over `1 / stride` of
+/// the image, no allocation.
 ///
 /// # Panics
 /// If `stride` is 0.
 #[must_use]
-pub fn smallest_difference(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
+pub fn smallest_step(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
     assert!(stride > 0, "stride must be positive");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let data = range.as_slice();
-    let mut min = f64::INFINITY;
-    let mut keep = |a: f32, b: f32| {
-        let d = (f64::from(a) - f64::from(b)).abs();
-        if d > 0.0 && d < min {
-            min = d;
-        }
-    };
-    for y in (0..h).step_by(stride) {
-        let row = &data[y * w..(y + 1) * w];
-        for pair in row.windows(2) {
-            keep(pair[0], pair[1]);
-        }
-        if y + 1 < h {
-            for (&a, &b) in row.iter().zip(&data[(y + 1) * w..(y + 2) * w]) {
-                keep(a, b);
+    // Every difference the sample holds, in a fixed order; NaN differences are skipped by the callers' tests.
+    let for_each_difference = |f: &mut dyn FnMut(f64)| {
+        for y in (0..h).step_by(stride) {
+            let row = &data[y * w..(y + 1) * w];
+            for pair in row.windows(2) {
+                f((f64::from(pair[0]) - f64::from(pair[1])).abs());
+            }
+            if y + 1 < h {
+                for (&a, &b) in row.iter().zip(&data[(y + 1) * w..(y + 2) * w]) {
+                    f((f64::from(a) - f64::from(b)).abs());
+                }
             }
         }
+    };
+    let mut step = f64::INFINITY;
+    for_each_difference(&mut |d| {
+        if d > 0.0 && d < step {
+            step = d;
+        }
+    });
+    if !step.is_finite() {
+        return None;
     }
-    // NaN differences compare false above, so they never enter.
-    min.is_finite().then_some(min)
+    let (mut nonzero, mut at_step, mut multiples) = (0usize, 0usize, 0usize);
+    for_each_difference(&mut |d| {
+        if d > 0.0 && d.is_finite() {
+            nonzero += 1;
+            at_step += usize::from(d <= step * (1.0 + STEP_REL_TOL));
+            let m = d / step;
+            multiples +=
+                usize::from((m - m.round()).abs() <= STEP_REL_TOL * m.round().max(1.0) + STEP_REL_TOL);
+        }
+    });
+    let common = nonzero >= 100
+        && at_step as f64 >= STEP_MIN_SHARE * nonzero as f64
+        && multiples as f64 >= STEP_MULTIPLE_SHARE * nonzero as f64;
+    common.then_some(step)
 }
 
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
@@ -299,14 +318,26 @@ mod tests {
     use rangeimage::{Grid, RangeImage};
 
     #[test]
-    fn smallest_difference_reads_the_finest_step_between_neighbours() {
-        // Steps of 0.5 down the rows, 2 across the columns, a no-data pixel (its differences never count).
-        let mut img: RangeImage = Grid::from_fn(9, 8, |x, y| (10.0 + 2.0 * x as f64 + 0.5 * y as f64) as f32);
+    fn smallest_step_reads_the_step_of_quantised_depth_only() {
+        // A ramp of steps 0.5 down the rows and 2 across, with a no-data pixel (its differences never count).
+        let mut img: RangeImage =
+            Grid::from_fn(40, 30, |x, y| (10.0 + 2.0 * x as f64 + 0.5 * y as f64) as f32);
         img[(3, 3)] = f32::NAN;
-        assert_eq!(smallest_difference(&img, 1), Some(0.5));
-        assert_eq!(smallest_difference(&img, 3), Some(0.5), "every 3rd row and the row below it");
-        assert_eq!(smallest_difference(&Grid::new(9, 8, 4.0f32), 1), None, "constant depth");
-        assert_eq!(smallest_difference(&Grid::new(9, 8, f32::NAN), 1), None, "no data");
+        assert_eq!(smallest_step(&img, 1), Some(0.5));
+        assert_eq!(smallest_step(&img, 3), Some(0.5), "every 3rd row and the row below it");
+        for s in [0.1, 0.5] {
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+            let noisy = scene(s, Some(0.25), 3);
+            assert_eq!(smallest_step(&noisy, 4), Some(0.25), "σ {s}, step 0.25");
+            assert_eq!(smallest_step(&scene(s, None, 3), 4), None, "σ {s}, continuous");
+            // A steep continuous plane with little noise: its smallest difference is no step.
+            let steep: RangeImage = Grid::from_fn(40, 30, |x, y| {
+                (3.0 * x as f64 + 0.7 * y as f64 + 0.01 * s * gauss(&mut rng)) as f32
+            });
+            assert_eq!(smallest_step(&steep, 1), None, "σ {s}, steep plane");
+        }
+        assert_eq!(smallest_step(&Grid::new(40, 30, 4.0f32), 1), None, "constant depth");
+        assert_eq!(smallest_step(&Grid::new(40, 30, f32::NAN), 1), None, "no data");
     }
 
     /// Unit-variance Gaussian (Irwin–Hall sum of 12 uniforms).
