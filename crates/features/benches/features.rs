@@ -33,11 +33,3 @@ fn derivatives(b: divan::Bencher, side: u32) {
     let p = features::Params::default();
     b.bench(|| features::derivatives(divan::black_box(&img), &p));
 }
-
-/// The test of [`features::Params::for_image`] (every 4th window's corner), which `compute` runs on every image.
-#[divan::bench(args = [512])]
-fn flat_share(b: divan::Bencher, side: u32) {
-    let img = rangeimage::testing::bench_scene(side);
-    assert!(features::flat_share(&img, features::FLAT_SHARE_STRIDE) < 0.25, "the scene keeps 5 × 5 windows");
-    b.bench(|| features::flat_share(divan::black_box(&img), features::FLAT_SHARE_STRIDE));
-}
