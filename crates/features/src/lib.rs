@@ -111,11 +111,8 @@ impl Params {
 /// Stride of the windows [`Params::for_image`] reads (1/16 of them).
 pub const FLAT_SHARE_STRIDE: usize = 4;
 
-/// Fewest full windows [`flat_share`] reads a share from (as the noise estimate of `planefit`).
-const MIN_FULL_WINDOWS: usize = 20;
-
 /// The share of the full 5 × 5 windows (no no-data pixel) whose top-left corner lies on every `stride`-th row
-/// and column that hold a single depth value; 0 if there are fewer than 20 such windows.
+/// and column that hold a single depth value; 0 if there is none.
 ///
 /// With noise, even a fraction of a quantisation step wide, almost no window is flat (the synthetic benchmark
 /// 0 %, real ABW 2–6 %, the NYU Kinect frames 1–19 %); on depth rounded to steps much coarser than its noise,
@@ -150,7 +147,7 @@ pub fn flat_share(range: &RangeImage, stride: usize) -> f64 {
             }
         }
     }
-    if full < MIN_FULL_WINDOWS { 0.0 } else { flat as f64 / full as f64 }
+    if full == 0 { 0.0 } else { flat as f64 / full as f64 }
 }
 
 /// Computes every field of [`SurfaceFeatures`] for `range` (NaN = no data), with the windows of
@@ -361,19 +358,13 @@ mod tests {
     fn flat_share_counts_single_valued_full_windows() {
         assert_eq!(flat_share(&image(12, 9, |_, _| 7.0), 1), 1.0);
         assert_eq!(flat_share(&image(4, 9, |_, _| 7.0), 1), 0.0, "no full window");
-        assert_eq!(flat_share(&image(7, 9, |_, _| 7.0), 1), 0.0, "fewer than 20 full windows");
         // A step between columns 5 and 6: of the corners x = 0..=7, windows at 0, 1, 6 and 7 are flat.
         let mut img = image(12, 9, |x, _| if x < 6.0 { 7.0 } else { 9.0 });
         assert_eq!(flat_share(&img, 1), 0.5);
         // A window holding no-data does not count, either way: 39 full windows, 19 flat.
         img[(0, 0)] = NAN;
         assert_eq!(flat_share(&img, 1), 19.0 / 39.0);
-        let big = image(44, 24, |x, y| if x < 22.0 && y < 12.0 { 7.0 } else { 9.0 + 0.5 * x });
-        assert_eq!(
-            flat_share(&big, 4),
-            10.0 / 50.0,
-            "corners on every 4th row and column: x ≤ 16 and y ≤ 4 flat"
-        );
+        assert_eq!(flat_share(&img, 4), 1.0 / 3.0, "corners (0|4, 0|4): three full, (0, 4) flat");
         assert!(flat_share(&staircase(0.25, 1.0, 1), 1) < 0.05, "noise dithers 1-step rounding");
         assert!(flat_share(&staircase(0.1, 3.0, 1), 1) > 0.3, "3-step terraces");
     }
