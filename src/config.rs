@@ -130,8 +130,6 @@ impl Config {
         c.segment.fill_max_residual = 0.0;
         c.segment.refine_passes = 0;
         c.segment.bend_max_angle_deg = 0.0;
-        // One window for every image, as the paper.
-        c.features.quantised_window_px = 0;
         c
     }
 
@@ -287,14 +285,6 @@ const KEY_DOCS: &[(&str, &str)] = &[
     ("features.window_px", "Window of the local plane fit (odd, ≥ 3)."),
     ("features.deriv_window_px", "Window of the quadratic (derivative) fit (odd, ≥ 3)."),
     ("features.k_std_window_px", "Window of the standard deviation of K (odd, ≥ 1)."),
-    (
-        "features.quantised_window_px",
-        "On depth quantised without dithering noise, the plane and derivative windows are at least this wide (odd; 0 = never).",
-    ),
-    (
-        "features.quantised_flat_share",
-        "Depth counts as quantised without dithering noise when at least this share of its 5 × 5 windows is flat.",
-    ),
     ("vcanny", "Canny on the plane parameters (C2)."),
     ("vcanny.sigma_px", "Standard deviation of the Gaussian smoothing, in pixels."),
     ("vcanny.kernel_px", "Side of the Gaussian mask (odd)."),

@@ -32,7 +32,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
         vcanny::detect_raw(&frame.range, &cfg.raw_canny.detector())
     } else {
         let (range, _) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
-        let plane = features::fit_planes(&range, cfg.features.for_image(&range).window_px);
+        let plane = features::fit_planes(&range, cfg.features.window_px);
         let valid = rangeimage::valid_mask(&frame.range);
         vcanny::detect_planes(&plane, &valid, &cfg.vcanny)
     };

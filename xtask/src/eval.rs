@@ -104,8 +104,6 @@ fn evaluate_one(
     let read_ms = t.elapsed().as_secs_f64() * 1e3;
     // The image's own noise and quantisation, for the report (not an input of the pipeline).
     let noise = planefit::noise::estimate(&frame.range);
-    // Whether the features widened their windows (quantised depth without dithering noise): the same test.
-    let flat_share = features::flat_share(&frame.range, features::FLAT_SHARE_STRIDE);
 
     let t_total = Instant::now();
     let out = seg.segment(&frame.range, &frame.camera);
@@ -133,7 +131,6 @@ fn evaluate_one(
         relax_energy_after: out.fin.relax_info.energy_after,
         noise_sigma: noise.sigma,
         noise_step: noise.step,
-        flat_share,
         figure: fig_path,
     })
 }

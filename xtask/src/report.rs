@@ -30,8 +30,6 @@ pub(crate) struct ImageRow {
     pub(crate) noise_sigma: f64,
     /// The image's depth quantisation step, if any.
     pub(crate) noise_step: Option<f64>,
-    /// The share of its full 5 × 5 windows that hold one depth value (`features::flat_share`).
-    pub(crate) flat_share: f64,
     #[serde(skip)]
     pub(crate) figure: PathBuf,
 }
@@ -301,7 +299,7 @@ fn per_image_table(rows: &[ImageRow]) -> Table {
             "F C1",
             "F C2",
             "F C",
-            "depth σ / step / flat",
+            "depth σ / step",
         ],
         per_image,
     )
@@ -311,7 +309,7 @@ fn per_image_table(rows: &[ImageRow]) -> Table {
 fn noise_cell(x: &ImageRow) -> String {
     let sigma = if x.noise_sigma.is_nan() { "—".to_string() } else { format!("{:.2}", x.noise_sigma) };
     let step = x.noise_step.map_or_else(|| "—".to_string(), |q| format!("{q:.3}"));
-    format!("{sigma} / {step} / {:.0} %", 100.0 * x.flat_share)
+    format!("{sigma} / {step}")
 }
 
 /// The range of the images' noise estimates, e.g. `depth σ 0.55–0.81, step 1.000`.
@@ -323,11 +321,10 @@ fn noise_range(rows: &[ImageRow]) -> String {
         rows.iter().map(|x| x.noise_step.map_or_else(|| "none".to_string(), |q| format!("{q:.3}"))).collect();
     steps.sort();
     steps.dedup();
-    let flat = rows.iter().map(|x| x.flat_share).fold(0.0, f64::max);
     if sig.is_empty() {
-        format!("depth σ —, step {}, flat ≤ {:.0} %", steps.join("/"), 100.0 * flat)
+        format!("depth σ —, step {}", steps.join("/"))
     } else {
-        format!("depth σ {lo:.2}–{hi:.2}, step {}, flat ≤ {:.0} %", steps.join("/"), 100.0 * flat)
+        format!("depth σ {lo:.2}–{hi:.2}, step {}", steps.join("/"))
     }
 }
 
@@ -495,14 +492,14 @@ pub(crate) fn summary(r: &Report) -> String {
 /// One CSV line per image with the main figures.
 fn csv(r: &Report) -> String {
     let mut s = String::from(
-        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms,noise_sigma,noise_step,flat_share\n",
+        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms,noise_sigma,noise_step\n",
     );
     for x in &r.rows {
         let s_ = &x.scores;
         let (h, g) = (&s_.hoover_final, &s_.hoover_regiongrow);
         let _ = writeln!(
             s,
-            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{},{:.4}",
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{}",
             x.stem,
             s_.raw_canny.matched.f,
             opt(s_.raw_canny.paper_precision_c1),
@@ -531,8 +528,7 @@ fn csv(r: &Report) -> String {
             x.timings.relax,
             x.total_ms,
             x.noise_sigma,
-            x.noise_step.map_or_else(String::new, |q| format!("{q:.4}")),
-            x.flat_share
+            x.noise_step.map_or_else(String::new, |q| format!("{q:.4}"))
         );
     }
     s

@@ -40,24 +40,11 @@ pub struct Params {
     pub deriv_window_px: u32,
     /// Side of the square window over which the standard deviation of K is taken (odd, ≥ 1).
     pub k_std_window_px: u32,
-    /// On an image quantised without dithering noise (see `quantised_flat_share`), the plane and derivative
-    /// windows are at least this wide (odd, ≥ 3; 0 = never): slanted planes there are staircases of flat
-    /// terraces, and a window inside one terrace sees a flat surface.
-    pub quantised_window_px: u32,
-    /// An image counts as quantised without dithering noise when at least this share of its full 5 × 5 windows
-    /// hold one single depth value ([`flat_share`]); in (0, 1].
-    pub quantised_flat_share: f64,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self {
-            window_px: 5,
-            deriv_window_px: 5,
-            k_std_window_px: 5,
-            quantised_window_px: 13,
-            quantised_flat_share: 0.25,
-        }
+        Self { window_px: 5, deriv_window_px: 5, k_std_window_px: 5 }
     }
 }
 
@@ -73,85 +60,11 @@ impl Params {
         };
         odd("features.window_px", self.window_px, 3)?;
         odd("features.deriv_window_px", self.deriv_window_px, 3)?;
-        odd("features.k_std_window_px", self.k_std_window_px, 1)?;
-        if self.quantised_window_px != 0 {
-            odd("features.quantised_window_px", self.quantised_window_px, 3)?;
-        }
-        if !(self.quantised_flat_share > 0.0 && self.quantised_flat_share <= 1.0) {
-            return Err(ParamError::new(
-                "features.quantised_flat_share",
-                format!("must be in (0, 1], got {}", self.quantised_flat_share),
-            ));
-        }
-        Ok(())
-    }
-
-    /// The parameters `range` is computed with: these, with the plane and derivative windows widened to
-    /// `quantised_window_px` if `range` is quantised without dithering noise ([`flat_share`] ≥
-    /// `quantised_flat_share`).
-    #[must_use]
-    pub fn for_image(&self, range: &RangeImage) -> Params {
-        let q = self.quantised_window_px;
-        if q == 0 || (self.window_px >= q && self.deriv_window_px >= q) {
-            return self.clone();
-        }
-        let share = flat_share(range, FLAT_SHARE_STRIDE);
-        if share < self.quantised_flat_share {
-            return self.clone();
-        }
-        tracing::debug!(share, window_px = q, "quantised without dithering noise: wider feature windows");
-        Params {
-            window_px: self.window_px.max(q),
-            deriv_window_px: self.deriv_window_px.max(q),
-            ..self.clone()
-        }
+        odd("features.k_std_window_px", self.k_std_window_px, 1)
     }
 }
 
-/// Stride of the windows [`Params::for_image`] reads (1/16 of them).
-pub const FLAT_SHARE_STRIDE: usize = 4;
-
-/// The share of the full 5 × 5 windows (no no-data pixel) whose top-left corner lies on every `stride`-th row
-/// and column that hold a single depth value; 0 if there is none.
-///
-/// With noise, even a fraction of a quantisation step wide, almost no window is flat (the synthetic benchmark
-/// 0 %, real ABW 2–6 %, the NYU Kinect frames 1–19 %); on depth rounded to steps much coarser than its noise,
-/// every window inside a terrace of a staircase is (the `staircase@1` family, step 3 and noise 0.25: 27–41 %).
-///
-/// # Panics
-/// If `stride` is 0.
-#[must_use]
-pub fn flat_share(range: &RangeImage, stride: usize) -> f64 {
-    assert!(stride > 0, "stride must be positive");
-    const W: usize = 5;
-    let (w, h) = (range.width() as usize, range.height() as usize);
-    if w < W || h < W {
-        return 0.0;
-    }
-    let data = range.as_slice();
-    let (mut full, mut flat) = (0usize, 0usize);
-    for y0 in (0..=h - W).step_by(stride) {
-        for x0 in (0..=w - W).step_by(stride) {
-            let first = data[y0 * w + x0];
-            let mut all_valid = true;
-            let mut same = true;
-            for dy in 0..W {
-                for &v in &data[(y0 + dy) * w + x0..(y0 + dy) * w + x0 + W] {
-                    all_valid &= v.is_finite();
-                    same &= v == first;
-                }
-            }
-            if all_valid {
-                full += 1;
-                flat += usize::from(same);
-            }
-        }
-    }
-    if full == 0 { 0.0 } else { flat as f64 / full as f64 }
-}
-
-/// Computes every field of [`SurfaceFeatures`] for `range` (NaN = no data), with the windows of
-/// [`Params::for_image`].
+/// Computes every field of [`SurfaceFeatures`] for `range` (NaN = no data).
 ///
 /// # Panics
 /// In debug builds, if `params` is invalid ([`Params::validate`]: callers validate once, at the edge).
@@ -159,7 +72,7 @@ pub fn flat_share(range: &RangeImage, stride: usize) -> f64 {
 pub fn compute(range: &RangeImage, params: &Params) -> SurfaceFeatures {
     let _s = tracing::info_span!("features", w = range.width(), h = range.height()).entered();
     debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
-    let f = compute_with(range, &params.for_image(range), fit::Path::Fast, SurfaceFeatures::default());
+    let f = compute_with(range, params, fit::Path::Fast, SurfaceFeatures::default());
     tracing::debug!(
         valid_planes = f.plane.as_slice().iter().filter(|p| p[0].is_finite()).count(),
         valid_k = f.k.as_slice().iter().filter(|v| v.is_finite()).count(),
@@ -178,7 +91,7 @@ pub fn compute_into(range: &RangeImage, params: &Params, out: &mut SurfaceFeatur
     let _s = tracing::info_span!("features", w = range.width(), h = range.height()).entered();
     debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
     let buffers = std::mem::take(out);
-    *out = compute_with(range, &params.for_image(range), fit::Path::Fast, buffers);
+    *out = compute_with(range, params, fit::Path::Fast, buffers);
 }
 
 /// `g`'s vector if it holds `n` values (they are all overwritten), else a new vector of `n` zeros: zeroed memory
@@ -269,8 +182,8 @@ impl Derivatives {
     }
 }
 
-/// The quadratic fit's derivatives of every pixel over the valid pixels of its derivative window (that of
-/// [`Params::for_image`]): the values [`compute`] derives K, H and curvedness from (bit-identical). NaN at no-data pixels and where the valid
+/// The quadratic fit's derivatives of every pixel over the valid pixels of its `deriv_window_px` window: the
+/// values [`compute`] derives K, H and curvedness from (bit-identical). NaN at no-data pixels and where the valid
 /// pixels do not determine a quadratic.
 ///
 /// # Panics
@@ -279,7 +192,7 @@ impl Derivatives {
 pub fn derivatives(range: &RangeImage, params: &Params) -> Derivatives {
     let _s = tracing::info_span!("features::derivatives", w = range.width(), h = range.height()).entered();
     debug_assert_eq!(params.validate(), Ok(()), "invalid features params");
-    derivatives_with(range, params.for_image(range).deriv_window_px, fit::Path::Fast)
+    derivatives_with(range, params.deriv_window_px, fit::Path::Fast)
 }
 
 /// [`derivatives`] without the checks, `path` as in [`compute_with`].
@@ -333,79 +246,8 @@ mod tests {
 
     const NAN: f32 = f32::NAN;
 
-    /// The defaults with the windows fixed whatever the image (no wider windows on quantised depth).
-    fn fixed() -> Params {
-        Params { quantised_window_px: 0, ..Params::default() }
-    }
-
     fn image(w: u32, h: u32, f: impl Fn(f64, f64) -> f64) -> RangeImage {
         Grid::from_fn(w, h, |x, y| f(f64::from(x), f64::from(y)) as f32)
-    }
-
-    /// A 96 × 80 plane of slopes (0.3, 0.2) range units per pixel, with Gaussian noise `sigma` (seeded), rounded
-    /// to multiples of `step`: with step 3 and little noise, terraces about 8 px wide.
-    fn staircase(sigma: f64, step: f64, seed: u64) -> RangeImage {
-        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-        Grid::from_fn(96, 80, |x, y| {
-            let noise = sigma * ((0..12).map(|_| rng.random::<f64>()).sum::<f64>() - 6.0);
-            let z = 100.0 + 0.3 * f64::from(x) + 0.2 * f64::from(y) + noise;
-            ((z / step).round() * step) as f32
-        })
-    }
-
-    #[test]
-    fn flat_share_counts_single_valued_full_windows() {
-        assert_eq!(flat_share(&image(12, 9, |_, _| 7.0), 1), 1.0);
-        assert_eq!(flat_share(&image(4, 9, |_, _| 7.0), 1), 0.0, "no full window");
-        // A step between columns 5 and 6: of the corners x = 0..=7, windows at 0, 1, 6 and 7 are flat.
-        let mut img = image(12, 9, |x, _| if x < 6.0 { 7.0 } else { 9.0 });
-        assert_eq!(flat_share(&img, 1), 0.5);
-        // A window holding no-data does not count, either way: 39 full windows, 19 flat.
-        img[(0, 0)] = NAN;
-        assert_eq!(flat_share(&img, 1), 19.0 / 39.0);
-        assert_eq!(flat_share(&img, 4), 1.0 / 3.0, "corners (0|4, 0|4): three full, (0, 4) flat");
-        assert!(flat_share(&staircase(0.25, 1.0, 1), 1) < 0.05, "noise dithers 1-step rounding");
-        assert!(flat_share(&staircase(0.1, 3.0, 1), 1) > 0.3, "3-step terraces");
-    }
-
-    #[test]
-    fn quantised_depth_without_noise_gets_the_wider_windows() {
-        let p = Params::default();
-        for (sigma, step, wide) in
-            [(0.1, 3.0, true), (0.0, 4.0, true), (0.0, 1.0, false), (0.25, 1.0, false), (0.6, 1.0, false)]
-        {
-            let q = p.for_image(&staircase(sigma, step, 2));
-            let want = if wide { p.quantised_window_px } else { p.window_px };
-            assert_eq!((q.window_px, q.deriv_window_px), (want, want), "σ {sigma}, step {step}");
-            assert_eq!(q.k_std_window_px, p.k_std_window_px);
-        }
-        let off = Params { quantised_window_px: 0, ..p.clone() };
-        assert_eq!(off.for_image(&staircase(0.1, 3.0, 2)), off);
-        let wide = Params { window_px: 15, deriv_window_px: 15, ..p };
-        assert_eq!(wide.for_image(&staircase(0.1, 3.0, 2)), wide, "windows already wider stay");
-    }
-
-    /// The point of the wider windows: on 3-step terraces the 5 × 5 planes tilt by the terraces' own slope
-    /// (0 inside one, steep across its edge); the 13 × 13 ones see the plane.
-    #[test]
-    fn wider_windows_recover_the_slope_of_a_staircase() {
-        let img = staircase(0.1, 3.0, 3);
-        let slope_error = |p: &Params| {
-            let f = compute_with(&img, p, fit::Path::Fast, SurfaceFeatures::default());
-            let (mut sum, mut n) = (0.0, 0.0);
-            for (x, y, pl) in f.plane.enumerate() {
-                if (8..88).contains(&x) && (8..72).contains(&y) {
-                    sum += (f64::from(pl[0]) - 0.3).hypot(f64::from(pl[1]) - 0.2);
-                    n += 1.0;
-                }
-            }
-            sum / n
-        };
-        let narrow = slope_error(&fixed());
-        let adaptive = slope_error(&Params::default().for_image(&img));
-        assert!(narrow > 0.05, "5 × 5 windows on terraces: mean slope error {narrow}");
-        assert!(adaptive < narrow / 4.0, "13 × 13: {adaptive}, 5 × 5: {narrow}");
     }
 
     #[test]
@@ -446,9 +288,7 @@ mod tests {
             other[(x, 0)] = NAN;
         }
         let mut out = SurfaceFeatures::default();
-        for p in
-            [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9, ..fixed() }]
-        {
+        for p in [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9 }] {
             // A first call on another size, then reuse: every value must be the new image's, bit for bit.
             for img in [&big, &small, &big, &other, &big, &other] {
                 // A value the call does not write keeps this marker (a NaN payload no stage produces).
@@ -474,7 +314,7 @@ mod tests {
         for (seed, window_px) in [(0u64, 5u32), (1, 3), (2, 5), (3, 7), (4, 9)] {
             let holed = random_image(seed, 41, 33, 1.0, seed % 2 == 0);
             for img in [&clean, &holed] {
-                let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 5, ..fixed() };
+                let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 5 };
                 let a = fit_planes(img, window_px);
                 for path in [fit::Path::Fast, fit::Path::Unspecialised] {
                     let b = compute_with(img, &p, path, SurfaceFeatures::default()).plane;
@@ -490,7 +330,7 @@ mod tests {
         // derivatives is consistent with them.
         for (seed, window_px) in [(5u64, 5u32), (6, 3), (7, 7), (8, 9)] {
             let img = random_image(seed, 37, 30, 1.0, seed % 2 == 1);
-            let p = Params { window_px: 5, deriv_window_px: window_px, k_std_window_px: 3, ..fixed() };
+            let p = Params { window_px: 5, deriv_window_px: window_px, k_std_window_px: 3 };
             let (f, d) = (compute(&img, &p), derivatives(&img, &p));
             let n = img.len();
             let (mut k, mut h, mut c) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -793,7 +633,7 @@ mod tests {
             let (scale, quantise) = if seed % 3 == 2 { (0.013, false) } else { (1.0, seed % 3 == 0) };
             let img = random_image(seed, w, h, scale, quantise);
             let (window_px, deriv_window_px, k_std_window_px) = windows[seed as usize % windows.len()];
-            let p = Params { window_px, deriv_window_px, k_std_window_px, ..fixed() };
+            let p = Params { window_px, deriv_window_px, k_std_window_px };
             let run = |path| {
                 let f = compute_with(&img, &p, path, SurfaceFeatures::default());
                 (f, derivatives_with(&img, p.deriv_window_px, path))
@@ -820,7 +660,7 @@ mod tests {
             let (scale, quantise) = if seed % 3 == 2 { (0.013, false) } else { (1.0, seed % 3 == 0) };
             let img = random_image(100 + seed, w, h, scale, quantise);
             let (window_px, deriv_window_px, k_std_window_px) = windows[seed as usize % windows.len()];
-            let p = Params { window_px, deriv_window_px, k_std_window_px, ..fixed() };
+            let p = Params { window_px, deriv_window_px, k_std_window_px };
             let run =
                 || (bits(&compute(&img, &p)), dbits(&derivatives(&img, &p)), fit_planes(&img, window_px));
             let paths: Vec<_> = isa::Isa::available()
@@ -845,7 +685,7 @@ mod tests {
         for (seed, window_px) in [(20u64, 3u32), (21, 5), (22, 7), (23, 5), (24, 9)] {
             let img = random_image(seed, 30 + seed as u32, 19, 1.0, seed % 2 == 0);
             let (w, h) = img.dimensions();
-            let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 3, ..fixed() };
+            let p = Params { window_px, deriv_window_px: window_px, k_std_window_px: 3 };
             let r = window_px / 2;
             let [fast, general] = [fit::Path::Fast, fit::Path::General].map(|path| {
                 (
@@ -928,10 +768,7 @@ mod tests {
         // Images narrower or lower than the windows (no fast pixel at all, or a single fast row/column).
         for (w, h) in [(0, 0), (0, 3), (1, 1), (2, 7), (7, 2), (5, 5), (6, 9), (9, 5)] {
             let img = random_image(u64::from(w * 31 + h), w, h, 1.0, true);
-            for p in [
-                Params::default(),
-                Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9, ..fixed() },
-            ] {
+            for p in [Params::default(), Params { window_px: 3, deriv_window_px: 7, k_std_window_px: 9 }] {
                 let fast = (compute(&img, &p), derivatives(&img, &p));
                 assert_eq!(fast.0.k.dimensions(), (w, h));
                 assert_eq!(fast.1.hessian.dimensions(), (w, h));

@@ -16,16 +16,7 @@ pub(crate) struct Scene {
 
 /// The features of `range` from the `features` stage, with 3×3 windows (the smallest; the scenes are small).
 pub(crate) fn features(range: &RangeImage) -> SurfaceFeatures {
-    features::compute(
-        range,
-        &features::Params {
-            window_px: 3,
-            deriv_window_px: 3,
-            k_std_window_px: 3,
-            quantised_window_px: 0,
-            ..features::Params::default()
-        },
-    )
+    features::compute(range, &features::Params { window_px: 3, deriv_window_px: 3, k_std_window_px: 3 })
 }
 
 /// Which face of [`box_scene`] a pixel belongs to: 1 = face A, 2 = face B (crease with A at
