@@ -14,7 +14,7 @@
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
 //! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
 //! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
-//! ([`planefit::noise::smallest_step`]): noise-free quantised depth (rendered, or a sensor that smooths
+//! ([`planefit::noise::smallest_step`]; the step test runs only when σ is below that): noise-free quantised depth (rendered, or a sensor that smooths
 //! before it rounds) reads σ ≈ 0 where most windows lie within one step, and scaled by that, every step became
 //! a jump. docs/method.md §2.5 has the measurements.
 
@@ -77,8 +77,16 @@ pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec
     let sigma = planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, scratch) * depth_scale;
     // Depth rounded to steps without noise reads σ ≈ 0 (most windows lie within one step; a float fit of a flat
     // window leaves ~1e-11): its rounding error is still that of its step, q / √12.
-    let rounding =
-        planefit::noise::smallest_step(range, SAMPLE_STRIDE).map_or(0.0, |q| q * depth_scale / 12f64.sqrt());
+    // The step test runs only when it matters: σ below the rounding error of the smallest difference.
+    let rounding = match planefit::noise::smallest_difference(range, SAMPLE_STRIDE) {
+        Some(q)
+            if sigma < q * depth_scale / 12f64.sqrt()
+                && planefit::noise::is_step(range, SAMPLE_STRIDE, q) =>
+        {
+            q * depth_scale / 12f64.sqrt()
+        }
+        _ => 0.0,
+    };
     let sigma = if sigma.is_nan() { sigma } else { sigma.max(rounding) };
     let k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
     let camera = match *camera {

@@ -73,44 +73,63 @@ pub fn estimate(range: &rangeimage::RangeImage) -> NoiseEstimate {
     NoiseEstimate { sigma, step, windows }
 }
 
-/// The quantisation step of depth as [`estimate`] finds it, but read only from every `stride`-th row (and the
-/// row below it) and only tried at the smallest nonzero difference between neighbours: that difference if at
-/// least 2 % of the nonzero differences equal it and 90 % are whole multiples of it, else `None` (continuous
-/// depth, too few differences, or a step that is not the smallest difference). Two passes over `1 / stride` of
-/// the image, no allocation.
+/// Calls `f` with the absolute difference of every pair of horizontal or vertical neighbours on every `stride`-th
+/// row (and between it and the row below), in raster order; NaN where either holds no data.
+fn for_each_difference(range: &rangeimage::RangeImage, stride: usize, mut f: impl FnMut(f64)) {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let data = range.as_slice();
+    for y in (0..h).step_by(stride) {
+        let row = &data[y * w..(y + 1) * w];
+        for pair in row.windows(2) {
+            f((f64::from(pair[0]) - f64::from(pair[1])).abs());
+        }
+        if y + 1 < h {
+            for (&a, &b) in row.iter().zip(&data[(y + 1) * w..(y + 2) * w]) {
+                f((f64::from(a) - f64::from(b)).abs());
+            }
+        }
+    }
+}
+
+/// The smallest nonzero difference between neighbours on every `stride`-th row (see [`smallest_step`]), taken in
+/// `f32`; `None` if there is none. One pass over `1 / stride` of the image.
 ///
 /// # Panics
 /// If `stride` is 0.
 #[must_use]
-pub fn smallest_step(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
+pub fn smallest_difference(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
     assert!(stride > 0, "stride must be positive");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let data = range.as_slice();
-    // Every difference the sample holds, in a fixed order; NaN differences are skipped by the callers' tests.
-    let for_each_difference = |f: &mut dyn FnMut(f64)| {
-        for y in (0..h).step_by(stride) {
-            let row = &data[y * w..(y + 1) * w];
-            for pair in row.windows(2) {
-                f((f64::from(pair[0]) - f64::from(pair[1])).abs());
-            }
-            if y + 1 < h {
-                for (&a, &b) in row.iter().zip(&data[(y + 1) * w..(y + 2) * w]) {
-                    f((f64::from(a) - f64::from(b)).abs());
-                }
-            }
-        }
+    // In f32, branch-free, so that the loops vectorise: a NaN difference (no data) or 0 counts as +∞.
+    let min_of = |a: &[f32], b: &[f32]| {
+        a.iter().zip(b).fold(f32::INFINITY, |m, (&x, &y)| {
+            let d = (x - y).abs();
+            m.min(if d > 0.0 { d } else { f32::INFINITY })
+        })
     };
-    let mut step = f64::INFINITY;
-    for_each_difference(&mut |d| {
-        if d > 0.0 && d < step {
-            step = d;
+    let mut min = f32::INFINITY;
+    for y in (0..h).step_by(stride) {
+        let row = &data[y * w..(y + 1) * w];
+        min = min.min(min_of(&row[..w.saturating_sub(1)], &row[1.min(w)..]));
+        if y + 1 < h {
+            min = min.min(min_of(row, &data[(y + 1) * w..(y + 2) * w]));
         }
-    });
-    if !step.is_finite() {
-        return None;
     }
+    min.is_finite().then_some(f64::from(min))
+}
+
+/// Whether `step` is the quantisation step of the neighbour differences on every `stride`-th row: at least 2 %
+/// of the nonzero differences equal it and 90 % are whole multiples of it (within 0.1 %; at least 100 nonzero
+/// differences). One pass over `1 / stride` of the image.
+///
+/// # Panics
+/// If `stride` is 0.
+#[must_use]
+pub fn is_step(range: &rangeimage::RangeImage, stride: usize, step: f64) -> bool {
+    assert!(stride > 0, "stride must be positive");
     let (mut nonzero, mut at_step, mut multiples) = (0usize, 0usize, 0usize);
-    for_each_difference(&mut |d| {
+    for_each_difference(range, stride, |d| {
         if d > 0.0 && d.is_finite() {
             nonzero += 1;
             at_step += usize::from(d <= step * (1.0 + STEP_REL_TOL));
@@ -119,10 +138,21 @@ pub fn smallest_step(range: &rangeimage::RangeImage, stride: usize) -> Option<f6
                 usize::from((m - m.round()).abs() <= STEP_REL_TOL * m.round().max(1.0) + STEP_REL_TOL);
         }
     });
-    let common = nonzero >= 100
+    nonzero >= 100
         && at_step as f64 >= STEP_MIN_SHARE * nonzero as f64
-        && multiples as f64 >= STEP_MULTIPLE_SHARE * nonzero as f64;
-    common.then_some(step)
+        && multiples as f64 >= STEP_MULTIPLE_SHARE * nonzero as f64
+}
+
+/// The quantisation step of depth as [`estimate`] finds it, but read only from every `stride`-th row (and the
+/// row below it) and only tried at the smallest nonzero difference between neighbours: that difference if
+/// [`is_step`], else `None` (continuous depth, too few differences, or a step that is not the smallest
+/// difference). Two passes over `1 / stride` of the image, no allocation.
+///
+/// # Panics
+/// If `stride` is 0.
+#[must_use]
+pub fn smallest_step(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
+    smallest_difference(range, stride).filter(|&d| is_step(range, stride, d))
 }
 
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
