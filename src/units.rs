@@ -14,9 +14,9 @@
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
 //! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
 //! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
-//! ([`planefit::noise::smallest_step`]; the step test runs only when σ is below that): noise-free quantised depth (rendered, or a sensor that smooths
-//! before it rounds) reads σ ≈ 0 where most windows lie within one step, and scaled by that, every step became
-//! a jump. docs/method.md §2.5 has the measurements.
+//! ([`planefit::noise::smallest_step`]; the step test runs only when σ is below that): noise-free quantised
+//! depth (rendered, or a sensor that smooths before it rounds) reads σ ≈ 0 where most windows lie within one
+//! step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
 
 use rangeimage::{Camera, RangeImage};
 

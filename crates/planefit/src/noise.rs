@@ -133,14 +133,18 @@ pub fn is_step(range: &rangeimage::RangeImage, stride: usize, step: f64) -> bool
         if d > 0.0 && d.is_finite() {
             nonzero += 1;
             at_step += usize::from(d <= step * (1.0 + STEP_REL_TOL));
-            let m = d / step;
-            multiples +=
-                usize::from((m - m.round()).abs() <= STEP_REL_TOL * m.round().max(1.0) + STEP_REL_TOL);
+            multiples += usize::from(is_multiple(d, step));
         }
     });
     nonzero >= 100
         && at_step as f64 >= STEP_MIN_SHARE * nonzero as f64
         && multiples as f64 >= STEP_MULTIPLE_SHARE * nonzero as f64
+}
+
+/// Whether the difference `d` is a whole multiple of `step` (within [`STEP_REL_TOL`] of the multiple).
+fn is_multiple(d: f64, step: f64) -> bool {
+    let m = d / step;
+    (m - m.round()).abs() <= STEP_REL_TOL * m.round().max(1.0) + STEP_REL_TOL
 }
 
 /// The quantisation step of depth as [`estimate`] finds it, but read only from every `stride`-th row (and the
@@ -330,13 +334,7 @@ fn quantisation_step(range: &rangeimage::RangeImage) -> Option<f64> {
         }
         i = end;
     };
-    let multiples = diffs
-        .iter()
-        .filter(|&&d| {
-            let m = d / step;
-            (m - m.round()).abs() <= STEP_REL_TOL * m.round().max(1.0) + STEP_REL_TOL
-        })
-        .count();
+    let multiples = diffs.iter().filter(|&&d| is_multiple(d, step)).count();
     (multiples as f64 >= STEP_MULTIPLE_SHARE * diffs.len() as f64).then_some(step)
 }
 
