@@ -155,6 +155,26 @@ fn row_hit<C: Cell>(old: &[C], da: &[C], db: &[C]) -> bool {
     acc.iter().fold(false, |x, &y| x | y)
 }
 
+/// Whether any cell of a `W`-cell window row is [`affected`] (one branch-free vector test).
+#[inline(always)]
+fn row_any<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> bool {
+    let mut acc = [0u8; W];
+    for j in 0..W {
+        acc[j] = u8::from(affected(old[j], da[j], db[j]));
+    }
+    acc.iter().fold(0, |x, &y| x | y) != 0
+}
+
+/// Bit `j` set when cell `j` of a `W`-cell window row is [`affected`] (`W ≤ 32`).
+#[inline(always)]
+fn row_bits<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> u32 {
+    let mut bits = 0u32;
+    for j in 0..W {
+        bits |= u32::from(affected(old[j], da[j], db[j])) << j;
+    }
+    bits
+}
+
 /// Squared distance from padded cell `p` to the nearest C2 point (`OCC2` in `flags`) within the
 /// cap, or `C::FAR`, when none is known to be closer than squared distance `from`.
 #[inline]
@@ -581,39 +601,98 @@ impl<C: Cell> State<C> {
             self.flags[a] &= !OCC2;
             self.flags[b] |= OCC2;
             self.scratch.clear();
-            let (ww, pw) = (self.win_w, self.pw);
-            let win = &self.win[dir];
-            let base = (a as isize + win.origin) as usize;
-            let mut d_int = 0.0;
-            for k in 0..self.win_h {
-                let row = base + k * pw;
-                let old = &self.c1d2[row..row + ww];
-                let da = &win.da[k * ww..(k + 1) * ww];
-                let db = &win.db[k * ww..(k + 1) * ww];
-                if !row_hit(old, da, db) {
-                    continue;
-                }
-                for j in 0..ww {
-                    let (o, a2, b2) = (old[j], da[j], db[j]);
-                    if !affected(o, a2, b2) {
-                        continue;
-                    }
-                    let new = if b2 < o {
-                        // b is closer than the old nearest: nothing else can be closer.
-                        b2
-                    } else {
-                        // The moved point was a nearest one; every other C2 point is at squared
-                        // distance ≥ old, so search from there.
-                        nearest_in(&self.flags, &self.disk, &self.start, row + j, o.get() as usize)
-                    };
-                    if new != o {
-                        self.scratch.push(((row + j) as u32, new));
-                        d_int += self.term.value_of(new) - self.term.value_of(o);
-                    }
-                }
-            }
+            let d_int = match self.win_w {
+                16 => self.scan_fixed::<16>(a, dir),
+                32 => self.scan_fixed::<32>(a, dir),
+                _ => self.scan_rows(a, dir),
+            };
             Some((d_int, d_ext))
         }
+    }
+
+    /// The cell at padded position `p` of a C2 move's window with cached squared distance `o`, squared distances
+    /// `da` / `db` to the move's source and target: if it is [`affected`], its new cached value, pushed to
+    /// `scratch` with the change of the internal energy added to `d_int` when it differs.
+    #[inline(always)]
+    fn update_cell(&mut self, p: usize, (o, da, db): (C, C, C), d_int: &mut f64) {
+        if !affected(o, da, db) {
+            return;
+        }
+        let new = if db < o {
+            // b is closer than the old nearest: nothing else can be closer.
+            db
+        } else {
+            // The moved point was a nearest one; every other C2 point is at squared
+            // distance ≥ old, so search from there.
+            nearest_in(&self.flags, &self.disk, &self.start, p, o.get() as usize)
+        };
+        if new != o {
+            self.scratch.push((p as u32, new));
+            *d_int += self.term.value_of(new) - self.term.value_of(o);
+        }
+    }
+
+    /// The window scan of a C2 move of the point at `a` by `dir` (the occupancy already moved): pushes the cells
+    /// whose cached distance changes to `scratch` (window rows top to bottom, cells left to right) and returns
+    /// ΔEⁱ, their changes summed in that order. Any window width (the reference for [`State::scan_fixed`]).
+    #[inline(always)]
+    fn scan_rows(&mut self, a: usize, dir: usize) -> f64 {
+        let (ww, pw) = (self.win_w, self.pw);
+        let base = (a as isize + self.win[dir].origin) as usize;
+        let mut d_int = 0.0;
+        for k in 0..self.win_h {
+            let row = base + k * pw;
+            let win = &self.win[dir];
+            let (da, db) = (&win.da[k * ww..(k + 1) * ww], &win.db[k * ww..(k + 1) * ww]);
+            if !row_hit(&self.c1d2[row..row + ww], da, db) {
+                continue;
+            }
+            for j in 0..ww {
+                let win = &self.win[dir];
+                let cell = (self.c1d2[row + j], win.da[k * ww + j], win.db[k * ww + j]);
+                self.update_cell(row + j, cell, &mut d_int);
+            }
+        }
+        d_int
+    }
+
+    /// [`State::scan_rows`] for windows `W` cells wide (so at most `W` rows high): first a bit mask of the rows
+    /// holding an affected cell, each row one branch-free vector test, then the cells of those rows in the same
+    /// order as [`State::scan_rows`] (the same pushes and the same sum).
+    #[inline(always)]
+    fn scan_fixed<const W: usize>(&mut self, a: usize, dir: usize) -> f64 {
+        debug_assert!(self.win_w == W && self.win_h <= W && W <= 32);
+        let (h, pw) = (self.win_h, self.pw);
+        let base = (a as isize + self.win[dir].origin) as usize;
+        let mut rows = 0u32;
+        {
+            let win = &self.win[dir];
+            let (da, db) = (win.da.as_chunks::<W>().0, win.db.as_chunks::<W>().0);
+            let region = &self.c1d2[base..base + (h - 1) * pw + W];
+            for k in 0..h {
+                let old: &[C; W] = region[k * pw..k * pw + W].try_into().expect("W cells");
+                rows |= u32::from(row_any(old, &da[k], &db[k])) << k;
+            }
+        }
+        let mut d_int = 0.0;
+        while rows != 0 {
+            let k = rows.trailing_zeros() as usize;
+            rows &= rows - 1;
+            let row = base + k * pw;
+            let mut cells = {
+                let win = &self.win[dir];
+                let old: &[C; W] = self.c1d2[row..row + W].try_into().expect("W cells");
+                row_bits(old, &win.da.as_chunks::<W>().0[k], &win.db.as_chunks::<W>().0[k])
+            };
+            while cells != 0 {
+                let j = cells.trailing_zeros() as usize;
+                cells &= cells - 1;
+                let win = &self.win[dir];
+                let cell = (self.c1d2[row + j], win.da[k * W + j], win.db[k * W + j]);
+                self.update_cell(row + j, cell, &mut d_int);
+            }
+        }
+        d_int
     }
 
     /// Applies the pending proposal of point `i` by `dir`.
@@ -792,6 +871,61 @@ mod tests {
                 let (c, r) = (i % pw, i / pw);
                 let image = (pad..pad + w).contains(&c) && (pad..pad + h).contains(&r);
                 assert_eq!(x, if image { 1.0 } else { 0.0 }, "w {w} h {h} pad {pad} at ({c}, {r})");
+            }
+        }
+    }
+
+    /// Random C2 moves of a state with cells `C` and cap `cap`: [`State::scan_fixed`] pushes the same cells and
+    /// returns the same ΔEⁱ bits as [`State::scan_rows`]; half of the moves are applied, so the states vary.
+    fn check_fixed_scan<C: Cell>(case: &crate::tests::Case, cap: f64, seed: u64) {
+        let term = DistanceTerm::new(cap);
+        let mut st = State::<C>::new(&case.c1, &case.c2, &case.s1, &case.mag, &case.valid, term, 0.3, 0.0);
+        assert!(st.len() > st.n1 + 10, "the case has C2 points");
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut moves = 0;
+        for _ in 0..4000 {
+            let i = rng.random_range(st.n1..st.len());
+            let dir = rng.random_range(0..8usize);
+            let a = st.pos[i] as usize;
+            let b = (a as isize + st.nbr[dir]) as usize;
+            if st.flags[b] & VALID == 0 || st.flags[b] & OCC2 != 0 {
+                continue;
+            }
+            st.flags[a] &= !OCC2;
+            st.flags[b] |= OCC2;
+            st.scratch.clear();
+            let got = match st.win_w {
+                16 => st.scan_fixed::<16>(a, dir),
+                32 => st.scan_fixed::<32>(a, dir),
+                w => panic!("window width {w}"),
+            };
+            let got_cells = std::mem::take(&mut st.scratch);
+            let want = st.scan_rows(a, dir);
+            assert_eq!(got.to_bits(), want.to_bits(), "cap {cap}, seed {seed}");
+            let cells = |v: &[(u32, C)]| v.iter().map(|&(p, d)| (p, d.get())).collect::<Vec<_>>();
+            assert_eq!(cells(&got_cells), cells(&st.scratch), "cap {cap}, seed {seed}");
+            moves += 1;
+            if rng.random_bool(0.5) { st.commit(i, dir, got, 0.0) } else { st.revert(i, dir) }
+        }
+        assert!(moves > 1000 && st.cache_consistent());
+    }
+
+    /// The fixed-width window scans (16 and 32 cells wide, byte and `u16` cells, every instruction set) match
+    /// the any-width row scan on random states and moves.
+    #[test]
+    fn fixed_width_scans_match_the_row_scan() {
+        for (seed, cap) in [(1, 10.0), (2, 7.5), (3, 15.5), (4, 3.0), (5, 1.0), (6, 12.3)] {
+            let case = crate::tests::random_case(90, 70, seed);
+            for isa in isa::Isa::available() {
+                isa::with_isa(isa, || {
+                    isa::dispatch(
+                        #[inline(always)]
+                        || {
+                            check_fixed_scan::<u8>(&case, cap, seed);
+                            check_fixed_scan::<u16>(&case, cap, seed);
+                        },
+                    )
+                });
             }
         }
     }
