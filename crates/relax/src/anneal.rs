@@ -3,8 +3,8 @@
 //! Moves hit random places of the image, so the state is laid out for few cache misses: one
 //! byte of flags per cell (valid, C2 occupied), one [`Cell`] (`u8`, or `u16` for caps over 15.8 px) per cell that is both the C1
 //! occupancy and the cached nearest-C2 squared distance of the C1 point there, and one `f32`
-//! array per strength. [`State::sweep`] draws its moves a few steps ahead and reads the cells
-//! they will need early, so the cache misses of consecutive moves overlap.
+//! array per strength. [`State::sweep`] draws its moves a few steps ahead and prefetches the cells
+//! they will need ([`isa::prefetch`]), so the cache misses of consecutive moves overlap.
 //!
 //! A C2 move from a to b can change the cached distance only of C1 points within the cap of a
 //! or b. Per direction, a window of `2·⌊cap⌋ + 2` rows by a multiple of 16 columns covers both
@@ -747,23 +747,35 @@ impl<C: Cell> State<C> {
         for r in &mut ring {
             *r = draw();
         }
+        for &(i, _) in &ring {
+            isa::prefetch(&self.pos, i);
+        }
         let mut accepted = 0;
         for k in 0..n {
             let (i, dir) = ring[k % LOOK];
             let next = draw();
             ring[k % LOOK] = next;
-            self.touch(next.0, next.1);
+            // Two stages: the position of a move LOOK steps ahead, then (its line arrived) the cells of the move
+            // LOOK / 2 steps ahead.
+            isa::prefetch(&self.pos, next.0);
+            let (i2, dir2) = ring[(k + LOOK / 2) % LOOK];
+            self.touch(i2, dir2);
             accepted += u64::from(self.attempt(i, dir, coins, t));
         }
         accepted
     }
 
-    /// Reads the cells a future move of point `i` by `dir` will read (a software prefetch).
+    /// Prefetches the cells a future move of point `i` by `dir` will read (hints only: nothing is read into the
+    /// program, so a cache miss here does not hold up the current move).
     #[inline(always)]
     fn touch(&self, i: usize, dir: usize) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
-        std::hint::black_box((self.vals[usize::from(i >= self.n1)][b], self.flags[b], self.c1d2[b]));
+        let vals = &self.vals[usize::from(i >= self.n1)];
+        isa::prefetch(vals, b);
+        isa::prefetch(vals, a);
+        isa::prefetch(&self.flags, b);
+        isa::prefetch(&self.c1d2, b);
     }
 
     /// Tries one random move at temperature `t`; returns whether it was accepted (tests: the
