@@ -356,22 +356,23 @@ impl<C: Cell> State<C> {
         lambda: f64,
         ab: f64,
     ) -> Self {
-        let mut st = Self::scaled(c1, c2, [s1, mag], [1.0, 1.0], valid, term, lambda, Buffers::default());
+        let mut st = Self::scaled(c1, c2, [s1, mag], false, valid, term, lambda, Buffers::default());
         st.ab = ab;
         st.ext_sum = ab;
         st
     }
 
     /// Builds the state from (already pruned) edge maps and the raw strengths `[s1, |∇|]`:
-    /// non-finite values count as 0, and each strength is divided by its `divisor` in f64 and
-    /// rounded to f32 (a divisor of 1 keeps the values). A + B is the sum of the stored
+    /// non-finite values count as 0, and with `normalize` each strength is divided in f64 by its mean over its
+    /// points (C1 for s1, C2 for |∇|; `crate::divisor`: summed in raster order, 1 unless positive and finite) and
+    /// rounded to f32 (without, the values are kept). A + B is the sum of the stored
     /// strengths over the initial points, C1 in raster order then C2 in raster order.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn scaled(
         c1: &EdgeMap,
         c2: &EdgeMap,
         strengths: [&Grid<f32>; 2],
-        divisor: [f64; 2],
+        normalize: bool,
         valid: &Grid<bool>,
         term: DistanceTerm,
         lambda: f64,
@@ -440,12 +441,21 @@ impl<C: Cell> State<C> {
             pending: C::EMPTY,
             rest: bufs,
         };
+        // The point list first: the means of the strengths over the points are summed while it is listed (the
+        // divisors `crate::divisor` computes, without another scan of the edge maps).
+        let sums = st.load_points(c1, c2, strengths);
+        let divisor = sums.map(|(sum, n)| {
+            let mean = if normalize && n > 0 { sum / n as f64 } else { 0.0 };
+            if mean > 0.0 && mean.is_finite() { mean } else { 1.0 }
+        });
         // Compiled for the best instruction set of this CPU (the divisions run several at a time; the same quotients).
         isa::dispatch(
             #[inline(always)]
             || st.load_strengths(valid, strengths, divisor),
         );
-        st.load_points(c1, c2);
+        for &p in &st.pos[st.n1..] {
+            st.flags[p as usize] |= OCC2;
+        }
         st.init_energies();
         st
     }
@@ -475,21 +485,29 @@ impl<C: Cell> State<C> {
         }
     }
 
-    /// The point list: C1 in raster order, then C2 in raster order (marked `OCC2` in the flags).
-    fn load_points(&mut self, c1: &EdgeMap, c2: &EdgeMap) {
+    /// The point list: C1 in raster order, then C2 in raster order (the caller marks C2 `OCC2` in the flags).
+    /// Returns per strength the sum of its raw values (non-finite as 0) over its points in that order, and their
+    /// number (s1 over C1, |∇| over C2).
+    fn load_points(&mut self, c1: &EdgeMap, c2: &EdgeMap, strengths: [&Grid<f32>; 2]) -> [(f64, u64); 2] {
         let w = self.w;
-        for (y, row) in c1.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = self.padded(0, y);
-            crate::for_each_set(row, |x| self.pos.push((p0 + x) as u32));
+        let mut sums = [(0.0, 0); 2];
+        for (k, map) in [c1, c2].into_iter().enumerate() {
+            let v = strengths[k].as_slice();
+            let (sum, n) = &mut sums[k];
+            for (y, row) in map.as_slice().chunks_exact(w.max(1)).enumerate() {
+                let p0 = self.padded(0, y);
+                crate::for_each_set(row, |x| {
+                    self.pos.push((p0 + x) as u32);
+                    let value = v[y * w + x];
+                    *sum += f64::from(if value.is_finite() { value } else { 0.0 });
+                    *n += 1;
+                });
+            }
+            if k == 0 {
+                self.n1 = self.pos.len();
+            }
         }
-        self.n1 = self.pos.len();
-        for (y, row) in c2.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = self.padded(0, y);
-            crate::for_each_set(row, |x| {
-                self.flags[p0 + x] |= OCC2;
-                self.pos.push((p0 + x) as u32);
-            });
-        }
+        sums
     }
 
     /// The cached distances of the C1 points, the internal energy and A + B from the loaded points.
