@@ -133,6 +133,20 @@ pub fn dispatch<R>(kernel: impl FnOnce() -> R) -> R {
     kernel()
 }
 
+/// Asks the CPU to start loading the cache line of `slice[i]` into its caches (x86-64 `prefetcht0`; nothing on
+/// other architectures). A hint: it reads nothing into the program and changes no result, and an index out of
+/// bounds is allowed (no fault, no effect on results). Unlike a plain load it does not hold up the instructions
+/// after it while the line arrives.
+#[inline(always)]
+pub fn prefetch<T>(slice: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(sse) = pulp::core_arch::x86::Sse::try_new() {
+        sse._mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(slice.as_ptr().wrapping_add(i).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (slice, i);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

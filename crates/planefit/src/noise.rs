@@ -196,9 +196,85 @@ fn sigma_of_windows(range: &rangeimage::RangeImage, stride: usize, rms: &mut Vec
     (sigma, windows)
 }
 
+/// Window offsets relative to the corner, centred coordinates: (dx, dy, index offset) for `dx, dy` in −2..=2,
+/// row by row.
+fn window_offsets(w: usize) -> [(f64, f64, usize); WINDOW * WINDOW] {
+    let r = WINDOW / 2;
+    std::array::from_fn(|k| {
+        let (dx, dy) = (k % WINDOW, k / WINDOW);
+        (dx as f64 - r as f64, dy as f64 - r as f64, dy * w + dx)
+    })
+}
+
+/// Windows computed side by side by [`window_rms`].
+const LANES: usize = 4;
+
 /// Residual RMS (√(SSR / 22)) of the least-squares plane of every full 5 × 5 window whose top-left corner
 /// lies on every `stride`-th row and column, in raster order.
+///
+/// `LANES` windows of a row side by side, each with exactly the operations of one window alone (in the same
+/// order, so the same bits: [`window_rms_one_by_one`] in the tests), so their dependency chains (the
+/// sequential sums) overlap.
 fn window_rms(range: &rangeimage::RangeImage, stride: usize, out: &mut Vec<f64>) {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    out.clear();
+    if w < WINDOW || h < WINDOW {
+        return;
+    }
+    let data = range.as_slice();
+    let r = WINDOW / 2;
+    let offsets = window_offsets(w);
+    // Σx² = Σy² = 5 · (4 + 1 + 0 + 1 + 4) over the centred window.
+    let sxx = 50.0;
+    let xs: Vec<usize> = (0..=w - WINDOW).step_by(stride).collect();
+    for y0 in (0..=h - WINDOW).step_by(stride) {
+        for group in xs.chunks(LANES) {
+            let corner: [usize; LANES] =
+                std::array::from_fn(|l| y0 * w + group.get(l).copied().unwrap_or(group[0]));
+            let centre: [f64; LANES] = corner.map(|c| f64::from(data[c + r * w + r]));
+            let full: [bool; LANES] = std::array::from_fn(|l| {
+                l < group.len()
+                    && centre[l].is_finite()
+                    && offsets.iter().all(|&(_, _, o)| data[corner[l] + o].is_finite())
+            });
+            if !full.contains(&true) {
+                continue;
+            }
+            let mut z = [[0.0f64; LANES]; WINDOW * WINDOW];
+            let (mut s, mut sx, mut sy) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+            for (zk, &(dx, dy, o)) in z.iter_mut().zip(&offsets) {
+                for l in 0..LANES {
+                    // Relative to the centre, so large depths lose no precision.
+                    let d = f64::from(data[corner[l] + o]) - centre[l];
+                    zk[l] = d;
+                    s[l] += d;
+                    sx[l] += dx * d;
+                    sy[l] += dy * d;
+                }
+            }
+            let abc: [(f64, f64, f64); LANES] =
+                std::array::from_fn(|l| (sx[l] / sxx, sy[l] / sxx, s[l] / (WINDOW * WINDOW) as f64));
+            // The sum of the squares from −0, as `Iterator::sum` (the same bits: every square is ≥ +0).
+            let mut ssr = [-0.0f64; LANES];
+            for (zk, &(dx, dy, _)) in z.iter().zip(&offsets) {
+                for l in 0..LANES {
+                    let (a, b, c) = abc[l];
+                    let e = zk[l] - (a * dx + b * dy + c);
+                    ssr[l] += e * e;
+                }
+            }
+            for l in 0..LANES {
+                if full[l] {
+                    out.push((ssr[l] / DOF).sqrt());
+                }
+            }
+        }
+    }
+}
+
+/// [`window_rms`] one window at a time (the reference of the tests).
+#[cfg(test)]
+fn window_rms_one_by_one(range: &rangeimage::RangeImage, stride: usize, out: &mut Vec<f64>) {
     let (w, h) = (range.width() as usize, range.height() as usize);
     out.clear();
     if w < WINDOW || h < WINDOW {
@@ -434,6 +510,33 @@ mod tests {
         assert!(naive > 1.5 * 0.6, "the scene's edges matter: naive RMS {naive}");
         let e = estimate(&img);
         assert!((e.sigma / 0.6 - 1.0).abs() < 0.05, "{}", e.sigma);
+    }
+
+    /// The windows side by side give the RMS of the windows one by one, bit for bit, on random images with
+    /// missing data, every stride up to 5 and widths that leave partial groups.
+    #[test]
+    fn windows_side_by_side_match_one_by_one() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+        for (w, h) in [(5u32, 5u32), (6, 9), (17, 12), (40, 31), (64, 7)] {
+            for missing in [0.0, 0.02, 0.3] {
+                let mut img = RangeImage::new(w, h, 0.0);
+                for v in img.as_mut_slice() {
+                    *v = if rng.random_bool(missing) {
+                        [f32::NAN, f32::INFINITY][rng.random_range(0..2usize)]
+                    } else {
+                        rng.random_range(100.0..2000.0f32)
+                    };
+                }
+                for stride in 1..=5 {
+                    let (mut a, mut b) = (Vec::new(), Vec::new());
+                    window_rms(&img, stride, &mut a);
+                    window_rms_one_by_one(&img, stride, &mut b);
+                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&a), bits(&b), "{w}x{h}, missing {missing}, stride {stride}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! (non-growable pixels and the frame hold [`BLOCKED`]), and the 3D point and local normal of a
 //! pixel sit next to each other, so the growth test of a neighbour touches two cache lines at most.
 
-use crate::merge::{Stats, merge, region_stats_into};
+use crate::merge::{MergeBufs, Stats, merge, region_stats_into, region_stats_update};
 use crate::plane::{Moments, Plane, cross, dot};
 use crate::{Info, MAX_RELAXATIONS, Mode, Params, Scratch, Segmentation, borders_into};
 use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
@@ -491,6 +491,7 @@ pub(crate) fn run(
     // Whether `mbufs.stats` are the statistics of the current labels (as `region_stats_into` gives them): a merge
     // that merges nothing leaves them so, until the labels change.
     let mut fresh = merged.n_merged == 0;
+    let mut merged_again = false;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
     let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
@@ -505,11 +506,24 @@ pub(crate) fn run(
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
             fresh = again.n_merged == 0;
+            if again.n_merged > 0 {
+                // Its input's statistics were recomputed in raster order: only the regions it merged are stale.
+                mbufs.mark_merged(next - 1);
+                merged_again = true;
+            }
         }
     }
 
+    let MergeBufs { stats, dirty, .. } = mbufs;
+    let stale = if fresh {
+        Stale::None
+    } else if merged_again {
+        Stale::Marked(dirty)
+    } else {
+        Stale::All
+    };
     (info.n_regions, info.n_unlabelled_valid_px) =
-        relabel_into(&ctx, range, labels, (next, fresh), &mut mbufs.stats, out_seg);
+        relabel_into(&ctx, range, labels, (next, stale), stats, out_seg);
     borders_into(&out_seg.labels, params.c1_one_sided, &mut out_seg.c1);
     tracing::debug!(regions = info.n_regions, dropped = info.n_dropped, filled = info.n_filled_px, "done");
     info
@@ -633,6 +647,17 @@ fn seed_and_grow(
     next
 }
 
+/// Which statistics of the last merge are not those of the current labels (see [`relabel_into`]).
+#[derive(Debug, Clone, Copy)]
+enum Stale<'a> {
+    /// None: they are.
+    None,
+    /// The labels marked (one flag per label): a merge whose input statistics were recomputed merged them.
+    Marked(&'a [bool]),
+    /// Every label.
+    All,
+}
+
 /// Unlabels the regions of fewer than `min` pixels. Returns which labels are still in the image and how many
 /// were dropped.
 fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
@@ -655,21 +680,23 @@ fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32)
     (used, n_dropped)
 }
 
-/// Final statistics under the current labels (labels below `next`; kept when `fresh` says `stats` already hold
-/// them), then the labels relabelled 1..n in raster order of first pixel while copied out of the padded grid into
+/// Final statistics under the current labels (labels below `next`; those `stale` does not name are kept, as
+/// `stats` already holds them), then the labels relabelled 1..n in raster order of first pixel while copied out of the padded grid into
 /// `out_seg.labels` (one pass), and the region records. Returns the number of regions and of valid pixels left
 /// unlabelled.
 fn relabel_into(
     ctx: &Ctx<'_>,
     range: &RangeImage,
     labels: &[u32],
-    (next, fresh): (u32, bool),
+    (next, stale): (u32, Stale<'_>),
     stats: &mut Vec<Stats>,
     out_seg: &mut Segmentation,
 ) -> (u32, u32) {
     let (w, h) = (ctx.w, ctx.h);
-    if !fresh {
-        region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats);
+    match stale {
+        Stale::None => {}
+        Stale::Marked(dirty) => region_stats_update(labels, ctx.geo, ctx.k, stats, dirty),
+        Stale::All => region_stats_into(labels, next - 1, ctx.geo, ctx.k, stats),
     }
     #[cfg(test)]
     {
@@ -678,7 +705,7 @@ fn relabel_into(
         let mut again = Vec::new();
         region_stats_into(labels, next - 1, ctx.geo, ctx.k, &mut again);
         let key = |s: &Stats| (s.count, s.n_k, s.first, s.sum_k.to_bits(), s.mom);
-        assert!(stats.iter().map(key).eq(again.iter().map(key)), "kept statistics differ (fresh: {fresh})");
+        assert!(stats.iter().map(key).eq(again.iter().map(key)), "kept statistics differ ({stale:?})");
     }
     let mut order: Vec<u32> = (1..next).filter(|&l| stats[l as usize].count > 0).collect();
     order.sort_unstable_by_key(|&l| stats[l as usize].first);

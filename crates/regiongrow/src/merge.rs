@@ -74,49 +74,101 @@ pub(crate) fn region_stats_into<const N: usize>(
             i += 1;
             continue;
         }
-        let mut s = st[l as usize];
-        if s.count == 0 {
-            s.first = i as u32;
-        }
-        // [Σx, Σy, Σz, Σxx, Σxy, Σxz, Σyy, Σyz, Σzz, ΣK]: adding 0 for a non-finite K leaves the
-        // (never −0) sum unchanged, and integer counts in f64 are exact, so this equals the
-        // pixel-by-pixel `Moments::add` sequence bit for bit.
-        let mut acc = [
-            s.mom.s[0],
-            s.mom.s[1],
-            s.mom.s[2],
-            s.mom.ss[0],
-            s.mom.ss[1],
-            s.mom.ss[2],
-            s.mom.ss[3],
-            s.mom.ss[4],
-            s.mom.ss[5],
-            s.sum_k,
-        ];
-        let start = i;
-        let mut n_k = 0u32;
-        while i < n && labels[i] == l {
-            let p = &pts[i];
-            let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-            let kv = k[i];
-            let fin = kv.is_finite();
-            n_k += u32::from(fin);
-            let kf = if fin { f64::from(kv) } else { 0.0 };
-            let t = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z, kf];
-            for (a, t) in acc.iter_mut().zip(t) {
-                *a += t;
-            }
-            i += 1;
-        }
-        let run = (i - start) as u32;
-        s.count += run;
-        s.n_k += n_k;
-        s.mom.n += f64::from(run);
-        s.mom.s = [acc[0], acc[1], acc[2]];
-        s.mom.ss = [acc[3], acc[4], acc[5], acc[6], acc[7], acc[8]];
-        s.sum_k = acc[9];
-        st[l as usize] = s;
+        i = add_run(labels, pts, k, i, &mut st[l as usize]);
     }
+}
+
+/// [`region_stats_into`] for the labels marked in `dirty` only (one flag per entry of `st`, label 0 unmarked):
+/// their entries are recomputed from `labels` by the same runs and additions (so to the same bits), the others
+/// are kept; the unmarked labels' runs are skipped without reading their points.
+#[inline(always)] // into `grow::run`, compiled for each instruction set
+pub(crate) fn region_stats_update<const N: usize>(
+    labels: &[u32],
+    pts: &[[f32; N]],
+    k: &[f32],
+    st: &mut [Stats],
+    dirty: &[bool],
+) {
+    let n = labels.len();
+    assert!(pts.len() == n && k.len() == n && N >= 3, "region_stats: array sizes differ");
+    assert!(
+        st.len() == dirty.len() && !dirty.first().copied().unwrap_or(false),
+        "region_stats_update: bad marks"
+    );
+    for (s, &d) in st.iter_mut().zip(dirty) {
+        if d {
+            *s = Stats { first: u32::MAX, ..Stats::default() };
+        }
+    }
+    let mut i = 0;
+    while i < n {
+        let l = labels[i];
+        if !dirty[l as usize] {
+            i += 1;
+            while i < n && labels[i] == l {
+                i += 1;
+            }
+            continue;
+        }
+        i = add_run(labels, pts, k, i, &mut st[l as usize]);
+    }
+}
+
+/// Adds the run of pixels with the label of pixel `i` that starts there to that label's statistics `st`
+/// (pixel by pixel in raster order); returns the index after the run.
+#[inline(always)]
+fn add_run<const N: usize>(
+    labels: &[u32],
+    pts: &[[f32; N]],
+    k: &[f32],
+    mut i: usize,
+    st: &mut Stats,
+) -> usize {
+    let n = labels.len();
+    let l = labels[i];
+    let mut s = *st;
+    if s.count == 0 {
+        s.first = i as u32;
+    }
+    // [Σx, Σy, Σz, Σxx, Σxy, Σxz, Σyy, Σyz, Σzz, ΣK]: adding 0 for a non-finite K leaves the
+    // (never −0) sum unchanged, and integer counts in f64 are exact, so this equals the
+    // pixel-by-pixel `Moments::add` sequence bit for bit.
+    let mut acc = [
+        s.mom.s[0],
+        s.mom.s[1],
+        s.mom.s[2],
+        s.mom.ss[0],
+        s.mom.ss[1],
+        s.mom.ss[2],
+        s.mom.ss[3],
+        s.mom.ss[4],
+        s.mom.ss[5],
+        s.sum_k,
+    ];
+    let start = i;
+    let mut n_k = 0u32;
+    while i < n && labels[i] == l {
+        let p = &pts[i];
+        let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        let kv = k[i];
+        let fin = kv.is_finite();
+        n_k += u32::from(fin);
+        let kf = if fin { f64::from(kv) } else { 0.0 };
+        let t = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z, kf];
+        for (a, t) in acc.iter_mut().zip(t) {
+            *a += t;
+        }
+        i += 1;
+    }
+    let run = (i - start) as u32;
+    s.count += run;
+    s.n_k += n_k;
+    s.mom.n += f64::from(run);
+    s.mom.s = [acc[0], acc[1], acc[2]];
+    s.mom.ss = [acc[3], acc[4], acc[5], acc[6], acc[7], acc[8]];
+    s.sum_k = acc[9];
+    *st = s;
+    i
 }
 
 /// The merge thresholds, pre-converted.
@@ -206,6 +258,8 @@ pub(crate) struct MergeBufs {
     /// Per label: its statistics changed (a region merged into it) during the current pass.
     changed: Vec<bool>,
     cand: Vec<(f64, u32, u32, u32, u32)>,
+    /// Per label: its pixels changed in the last [`merge`] ([`MergeBufs::mark_merged`]).
+    pub(crate) dirty: Vec<bool>,
 }
 
 /// A cached [`Criterion::score`]: `None` until computed, then the score (itself `None` for a pair that may
@@ -224,6 +278,24 @@ impl MergeBufs {
         self.parent.reserve(n);
         self.changed.clear();
         self.changed.reserve(n);
+        self.dirty.clear();
+        self.dirty.reserve(n);
+    }
+
+    /// After a [`merge`] of labels `0..=max_label` that merged (its root table is left in `parent`): marks in
+    /// `dirty` the labels whose pixels changed, the merged-away ones and the roots that took them in. The others
+    /// keep in `stats` the raster-order statistics of the merge's input, which are those of its output.
+    pub(crate) fn mark_merged(&mut self, max_label: u32) {
+        let n = max_label as usize + 1;
+        self.dirty.clear();
+        self.dirty.resize(n, false);
+        for l in 0..n {
+            let r = self.parent[l] as usize;
+            if r != l {
+                self.dirty[l] = true;
+                self.dirty[r] = true;
+            }
+        }
     }
 }
 
@@ -258,7 +330,7 @@ pub(crate) fn merge<const N: usize>(
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
     bufs: &mut MergeBufs,
 ) -> Merged {
-    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand } = bufs;
+    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, .. } = bufs;
     region_stats_into(labels, max_label, pts, k, stats);
     let crit = Criterion::new(params);
     let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };

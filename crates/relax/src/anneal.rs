@@ -3,8 +3,8 @@
 //! Moves hit random places of the image, so the state is laid out for few cache misses: one
 //! byte of flags per cell (valid, C2 occupied), one [`Cell`] (`u8`, or `u16` for caps over 15.8 px) per cell that is both the C1
 //! occupancy and the cached nearest-C2 squared distance of the C1 point there, and one `f32`
-//! array per strength. [`State::sweep`] draws its moves a few steps ahead and reads the cells
-//! they will need early, so the cache misses of consecutive moves overlap.
+//! array per strength. [`State::sweep`] draws its moves a few steps ahead and prefetches the cells
+//! they will need ([`isa::prefetch`]), so the cache misses of consecutive moves overlap.
 //!
 //! A C2 move from a to b can change the cached distance only of C1 points within the cap of a
 //! or b. Per direction, a window of `2·⌊cap⌋ + 2` rows by a multiple of 16 columns covers both
@@ -155,11 +155,39 @@ fn row_hit<C: Cell>(old: &[C], da: &[C], db: &[C]) -> bool {
     acc.iter().fold(false, |x, &y| x | y)
 }
 
+/// Whether any cell of a `W`-cell window row is [`affected`] (one branch-free vector test).
+#[inline(always)]
+fn row_any<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> bool {
+    let mut acc = [0u8; W];
+    for j in 0..W {
+        acc[j] = u8::from(affected(old[j], da[j], db[j]));
+    }
+    acc.iter().fold(0, |x, &y| x | y) != 0
+}
+
+/// Bit `j` set when cell `j` of a `W`-cell window row is [`affected`] (`W ≤ 32`).
+#[inline(always)]
+fn row_bits<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> u32 {
+    let mut bits = 0u32;
+    for j in 0..W {
+        bits |= u32::from(affected(old[j], da[j], db[j])) << j;
+    }
+    bits
+}
+
 /// Squared distance from padded cell `p` to the nearest C2 point (`OCC2` in `flags`) within the
-/// cap, or `C::FAR`, when none is known to be closer than squared distance `from`.
+/// cap, or `C::FAR`, when none is known to be closer than squared distance `from`. The disk entries are read
+/// eight at a time and the first occupied one of a group taken (the first in the disk's order, as one by one).
 #[inline]
 fn nearest_in<C: Cell>(flags: &[u8], disk: &[(isize, C)], start: &[u32], p: usize, from: usize) -> C {
-    for &(off, d2) in &disk[start[from] as usize..] {
+    let mut chunks = disk[start[from] as usize..].chunks_exact(8);
+    for ch in &mut chunks {
+        let hits: [bool; 8] = std::array::from_fn(|k| flags[(p as isize + ch[k].0) as usize] & OCC2 != 0);
+        if let Some(k) = hits.iter().position(|&h| h) {
+            return ch[k].1;
+        }
+    }
+    for &(off, d2) in chunks.remainder() {
         if flags[(p as isize + off) as usize] & OCC2 != 0 {
             return d2;
         }
@@ -336,22 +364,23 @@ impl<C: Cell> State<C> {
         lambda: f64,
         ab: f64,
     ) -> Self {
-        let mut st = Self::scaled(c1, c2, [s1, mag], [1.0, 1.0], valid, term, lambda, Buffers::default());
+        let mut st = Self::scaled(c1, c2, [s1, mag], false, valid, term, lambda, Buffers::default());
         st.ab = ab;
         st.ext_sum = ab;
         st
     }
 
     /// Builds the state from (already pruned) edge maps and the raw strengths `[s1, |∇|]`:
-    /// non-finite values count as 0, and each strength is divided by its `divisor` in f64 and
-    /// rounded to f32 (a divisor of 1 keeps the values). A + B is the sum of the stored
+    /// non-finite values count as 0, and with `normalize` each strength is divided in f64 by its mean over its
+    /// points (C1 for s1, C2 for |∇|; `crate::divisor`: summed in raster order, 1 unless positive and finite) and
+    /// rounded to f32 (without, the values are kept). A + B is the sum of the stored
     /// strengths over the initial points, C1 in raster order then C2 in raster order.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn scaled(
         c1: &EdgeMap,
         c2: &EdgeMap,
         strengths: [&Grid<f32>; 2],
-        divisor: [f64; 2],
+        normalize: bool,
         valid: &Grid<bool>,
         term: DistanceTerm,
         lambda: f64,
@@ -420,12 +449,21 @@ impl<C: Cell> State<C> {
             pending: C::EMPTY,
             rest: bufs,
         };
+        // The point list first: the means of the strengths over the points are summed while it is listed (the
+        // divisors `crate::divisor` computes, without another scan of the edge maps).
+        let sums = st.load_points(c1, c2, strengths);
+        let divisor = sums.map(|(sum, n)| {
+            let mean = if normalize && n > 0 { sum / n as f64 } else { 0.0 };
+            if mean > 0.0 && mean.is_finite() { mean } else { 1.0 }
+        });
         // Compiled for the best instruction set of this CPU (the divisions run several at a time; the same quotients).
         isa::dispatch(
             #[inline(always)]
             || st.load_strengths(valid, strengths, divisor),
         );
-        st.load_points(c1, c2);
+        for &p in &st.pos[st.n1..] {
+            st.flags[p as usize] |= OCC2;
+        }
         st.init_energies();
         st
     }
@@ -455,21 +493,29 @@ impl<C: Cell> State<C> {
         }
     }
 
-    /// The point list: C1 in raster order, then C2 in raster order (marked `OCC2` in the flags).
-    fn load_points(&mut self, c1: &EdgeMap, c2: &EdgeMap) {
+    /// The point list: C1 in raster order, then C2 in raster order (the caller marks C2 `OCC2` in the flags).
+    /// Returns per strength the sum of its raw values (non-finite as 0) over its points in that order, and their
+    /// number (s1 over C1, |∇| over C2).
+    fn load_points(&mut self, c1: &EdgeMap, c2: &EdgeMap, strengths: [&Grid<f32>; 2]) -> [(f64, u64); 2] {
         let w = self.w;
-        for (y, row) in c1.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = self.padded(0, y);
-            crate::for_each_set(row, |x| self.pos.push((p0 + x) as u32));
+        let mut sums = [(0.0, 0); 2];
+        for (k, map) in [c1, c2].into_iter().enumerate() {
+            let v = strengths[k].as_slice();
+            let (sum, n) = &mut sums[k];
+            for (y, row) in map.as_slice().chunks_exact(w.max(1)).enumerate() {
+                let p0 = self.padded(0, y);
+                crate::for_each_set(row, |x| {
+                    self.pos.push((p0 + x) as u32);
+                    let value = v[y * w + x];
+                    *sum += f64::from(if value.is_finite() { value } else { 0.0 });
+                    *n += 1;
+                });
+            }
+            if k == 0 {
+                self.n1 = self.pos.len();
+            }
         }
-        self.n1 = self.pos.len();
-        for (y, row) in c2.as_slice().chunks_exact(w.max(1)).enumerate() {
-            let p0 = self.padded(0, y);
-            crate::for_each_set(row, |x| {
-                self.flags[p0 + x] |= OCC2;
-                self.pos.push((p0 + x) as u32);
-            });
-        }
+        sums
     }
 
     /// The cached distances of the C1 points, the internal energy and A + B from the loaded points.
@@ -581,39 +627,98 @@ impl<C: Cell> State<C> {
             self.flags[a] &= !OCC2;
             self.flags[b] |= OCC2;
             self.scratch.clear();
-            let (ww, pw) = (self.win_w, self.pw);
-            let win = &self.win[dir];
-            let base = (a as isize + win.origin) as usize;
-            let mut d_int = 0.0;
-            for k in 0..self.win_h {
-                let row = base + k * pw;
-                let old = &self.c1d2[row..row + ww];
-                let da = &win.da[k * ww..(k + 1) * ww];
-                let db = &win.db[k * ww..(k + 1) * ww];
-                if !row_hit(old, da, db) {
-                    continue;
-                }
-                for j in 0..ww {
-                    let (o, a2, b2) = (old[j], da[j], db[j]);
-                    if !affected(o, a2, b2) {
-                        continue;
-                    }
-                    let new = if b2 < o {
-                        // b is closer than the old nearest: nothing else can be closer.
-                        b2
-                    } else {
-                        // The moved point was a nearest one; every other C2 point is at squared
-                        // distance ≥ old, so search from there.
-                        nearest_in(&self.flags, &self.disk, &self.start, row + j, o.get() as usize)
-                    };
-                    if new != o {
-                        self.scratch.push(((row + j) as u32, new));
-                        d_int += self.term.value_of(new) - self.term.value_of(o);
-                    }
-                }
-            }
+            let d_int = match self.win_w {
+                16 => self.scan_fixed::<16>(a, dir),
+                32 => self.scan_fixed::<32>(a, dir),
+                _ => self.scan_rows(a, dir),
+            };
             Some((d_int, d_ext))
         }
+    }
+
+    /// The cell at padded position `p` of a C2 move's window with cached squared distance `o`, squared distances
+    /// `da` / `db` to the move's source and target: if it is [`affected`], its new cached value, pushed to
+    /// `scratch` with the change of the internal energy added to `d_int` when it differs.
+    #[inline(always)]
+    fn update_cell(&mut self, p: usize, (o, da, db): (C, C, C), d_int: &mut f64) {
+        if !affected(o, da, db) {
+            return;
+        }
+        let new = if db < o {
+            // b is closer than the old nearest: nothing else can be closer.
+            db
+        } else {
+            // The moved point was a nearest one; every other C2 point is at squared
+            // distance ≥ old, so search from there.
+            nearest_in(&self.flags, &self.disk, &self.start, p, o.get() as usize)
+        };
+        if new != o {
+            self.scratch.push((p as u32, new));
+            *d_int += self.term.value_of(new) - self.term.value_of(o);
+        }
+    }
+
+    /// The window scan of a C2 move of the point at `a` by `dir` (the occupancy already moved): pushes the cells
+    /// whose cached distance changes to `scratch` (window rows top to bottom, cells left to right) and returns
+    /// ΔEⁱ, their changes summed in that order. Any window width (the reference for [`State::scan_fixed`]).
+    #[inline(always)]
+    fn scan_rows(&mut self, a: usize, dir: usize) -> f64 {
+        let (ww, pw) = (self.win_w, self.pw);
+        let base = (a as isize + self.win[dir].origin) as usize;
+        let mut d_int = 0.0;
+        for k in 0..self.win_h {
+            let row = base + k * pw;
+            let win = &self.win[dir];
+            let (da, db) = (&win.da[k * ww..(k + 1) * ww], &win.db[k * ww..(k + 1) * ww]);
+            if !row_hit(&self.c1d2[row..row + ww], da, db) {
+                continue;
+            }
+            for j in 0..ww {
+                let win = &self.win[dir];
+                let cell = (self.c1d2[row + j], win.da[k * ww + j], win.db[k * ww + j]);
+                self.update_cell(row + j, cell, &mut d_int);
+            }
+        }
+        d_int
+    }
+
+    /// [`State::scan_rows`] for windows `W` cells wide (so at most `W` rows high): first a bit mask of the rows
+    /// holding an affected cell, each row one branch-free vector test, then the cells of those rows in the same
+    /// order as [`State::scan_rows`] (the same pushes and the same sum).
+    #[inline(always)]
+    fn scan_fixed<const W: usize>(&mut self, a: usize, dir: usize) -> f64 {
+        debug_assert!(self.win_w == W && self.win_h <= W && W <= 32);
+        let (h, pw) = (self.win_h, self.pw);
+        let base = (a as isize + self.win[dir].origin) as usize;
+        let mut rows = 0u32;
+        {
+            let win = &self.win[dir];
+            let (da, db) = (win.da.as_chunks::<W>().0, win.db.as_chunks::<W>().0);
+            let region = &self.c1d2[base..base + (h - 1) * pw + W];
+            for k in 0..h {
+                let old: &[C; W] = region[k * pw..k * pw + W].try_into().expect("W cells");
+                rows |= u32::from(row_any(old, &da[k], &db[k])) << k;
+            }
+        }
+        let mut d_int = 0.0;
+        while rows != 0 {
+            let k = rows.trailing_zeros() as usize;
+            rows &= rows - 1;
+            let row = base + k * pw;
+            let mut cells = {
+                let win = &self.win[dir];
+                let old: &[C; W] = self.c1d2[row..row + W].try_into().expect("W cells");
+                row_bits(old, &win.da.as_chunks::<W>().0[k], &win.db.as_chunks::<W>().0[k])
+            };
+            while cells != 0 {
+                let j = cells.trailing_zeros() as usize;
+                cells &= cells - 1;
+                let win = &self.win[dir];
+                let cell = (self.c1d2[row + j], win.da[k * W + j], win.db[k * W + j]);
+                self.update_cell(row + j, cell, &mut d_int);
+            }
+        }
+        d_int
     }
 
     /// Applies the pending proposal of point `i` by `dir`.
@@ -668,23 +773,35 @@ impl<C: Cell> State<C> {
         for r in &mut ring {
             *r = draw();
         }
+        for &(i, _) in &ring {
+            isa::prefetch(&self.pos, i);
+        }
         let mut accepted = 0;
         for k in 0..n {
             let (i, dir) = ring[k % LOOK];
             let next = draw();
             ring[k % LOOK] = next;
-            self.touch(next.0, next.1);
+            // Two stages: the position of a move LOOK steps ahead, then (its line arrived) the cells of the move
+            // LOOK / 2 steps ahead.
+            isa::prefetch(&self.pos, next.0);
+            let (i2, dir2) = ring[(k + LOOK / 2) % LOOK];
+            self.touch(i2, dir2);
             accepted += u64::from(self.attempt(i, dir, coins, t));
         }
         accepted
     }
 
-    /// Reads the cells a future move of point `i` by `dir` will read (a software prefetch).
+    /// Prefetches the cells a future move of point `i` by `dir` will read (hints only: nothing is read into the
+    /// program, so a cache miss here does not hold up the current move).
     #[inline(always)]
     fn touch(&self, i: usize, dir: usize) {
         let a = self.pos[i] as usize;
         let b = (a as isize + self.nbr[dir]) as usize;
-        std::hint::black_box((self.vals[usize::from(i >= self.n1)][b], self.flags[b], self.c1d2[b]));
+        let vals = &self.vals[usize::from(i >= self.n1)];
+        isa::prefetch(vals, b);
+        isa::prefetch(vals, a);
+        isa::prefetch(&self.flags, b);
+        isa::prefetch(&self.c1d2, b);
     }
 
     /// Tries one random move at temperature `t`; returns whether it was accepted (tests: the
@@ -792,6 +909,89 @@ mod tests {
                 let (c, r) = (i % pw, i / pw);
                 let image = (pad..pad + w).contains(&c) && (pad..pad + h).contains(&r);
                 assert_eq!(x, if image { 1.0 } else { 0.0 }, "w {w} h {h} pad {pad} at ({c}, {r})");
+            }
+        }
+    }
+
+    /// Random C2 moves of a state with cells `C` and cap `cap`: [`State::scan_fixed`] pushes the same cells and
+    /// returns the same ΔEⁱ bits as [`State::scan_rows`]; half of the moves are applied, so the states vary.
+    fn check_fixed_scan<C: Cell>(case: &crate::tests::Case, cap: f64, seed: u64) {
+        let term = DistanceTerm::new(cap);
+        let mut st = State::<C>::new(&case.c1, &case.c2, &case.s1, &case.mag, &case.valid, term, 0.3, 0.0);
+        assert!(st.len() > st.n1 + 10, "the case has C2 points");
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut moves = 0;
+        for _ in 0..4000 {
+            let i = rng.random_range(st.n1..st.len());
+            let dir = rng.random_range(0..8usize);
+            let a = st.pos[i] as usize;
+            let b = (a as isize + st.nbr[dir]) as usize;
+            if st.flags[b] & VALID == 0 || st.flags[b] & OCC2 != 0 {
+                continue;
+            }
+            st.flags[a] &= !OCC2;
+            st.flags[b] |= OCC2;
+            st.scratch.clear();
+            let got = match st.win_w {
+                16 => st.scan_fixed::<16>(a, dir),
+                32 => st.scan_fixed::<32>(a, dir),
+                w => panic!("window width {w}"),
+            };
+            let got_cells = std::mem::take(&mut st.scratch);
+            let want = st.scan_rows(a, dir);
+            assert_eq!(got.to_bits(), want.to_bits(), "cap {cap}, seed {seed}");
+            let cells = |v: &[(u32, C)]| v.iter().map(|&(p, d)| (p, d.get())).collect::<Vec<_>>();
+            assert_eq!(cells(&got_cells), cells(&st.scratch), "cap {cap}, seed {seed}");
+            moves += 1;
+            if rng.random_bool(0.5) { st.commit(i, dir, got, 0.0) } else { st.revert(i, dir) }
+        }
+        assert!(moves > 1000 && st.cache_consistent());
+    }
+
+    /// The fixed-width window scans (16 and 32 cells wide, byte and `u16` cells, every instruction set) match
+    /// the any-width row scan on random states and moves.
+    #[test]
+    fn fixed_width_scans_match_the_row_scan() {
+        for (seed, cap) in [(1, 10.0), (2, 7.5), (3, 15.5), (4, 3.0), (5, 1.0), (6, 12.3)] {
+            let case = crate::tests::random_case(90, 70, seed);
+            for isa in isa::Isa::available() {
+                isa::with_isa(isa, || {
+                    isa::dispatch(
+                        #[inline(always)]
+                        || {
+                            check_fixed_scan::<u8>(&case, cap, seed);
+                            check_fixed_scan::<u16>(&case, cap, seed);
+                        },
+                    )
+                });
+            }
+        }
+    }
+
+    /// `nearest_in` (disk entries eight at a time) finds the first occupied entry in the disk's order from
+    /// `start[from]`, as the entry-by-entry search, on random occupancies of every density and every `from`.
+    #[test]
+    fn grouped_nearest_search_matches_one_by_one() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
+        for (r, cap2) in [(10, 100u32), (3, 12), (1, 1), (15, 252)] {
+            let pw = 2 * r as usize + 41;
+            let (disk, start) = disk_tables::<u8>(r, cap2, pw);
+            for density in [0.0, 0.002, 0.02, 0.2, 0.9] {
+                let flags: Vec<u8> = (0..pw * pw)
+                    .map(|_| if rng.random_bool(density) { OCC2 | VALID } else { VALID })
+                    .collect();
+                for _ in 0..200 {
+                    let p = (r as usize + rng.random_range(0..41usize)) * pw
+                        + r as usize
+                        + rng.random_range(0..41usize);
+                    for from in 0..=cap2 as usize + 1 {
+                        let want = disk[start[from] as usize..]
+                            .iter()
+                            .find(|&&(off, _)| flags[(p as isize + off) as usize] & OCC2 != 0)
+                            .map_or(<u8 as Cell>::FAR, |e| e.1);
+                        assert_eq!(nearest_in(&flags, &disk, &start, p, from), want, "r {r}, from {from}");
+                    }
+                }
             }
         }
     }

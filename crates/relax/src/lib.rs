@@ -486,16 +486,15 @@ pub fn relax_into(
     let mut info =
         Info { removed_c1: count(c1) - count(p1), removed_c2: count(c2) - count(p2), ..Info::default() };
     tracing::debug!(removed_c1 = info.removed_c1, removed_c2 = info.removed_c2, "pruned");
-    let div = [divisor(s1, p1, params.normalize), divisor(magnitude, p2, params.normalize)];
     let term = DistanceTerm::new(params.distance_cap_px());
     // Scaling fused into the state (the same values and A + B as `scaled` / `external_sum`).
     let bufs = std::mem::take(state);
     let strengths = [s1, magnitude];
     *state = if term.cap2 <= <u8 as Cell>::MAX_CAP2 {
-        let st = State::<u8>::scaled(p1, p2, strengths, div, valid, term, params.lambda, bufs);
+        let st = State::<u8>::scaled(p1, p2, strengths, params.normalize, valid, term, params.lambda, bufs);
         anneal(st, params, seed, (initial, best), &mut info, out)
     } else {
-        let st = State::<u16>::scaled(p1, p2, strengths, div, valid, term, params.lambda, bufs);
+        let st = State::<u16>::scaled(p1, p2, strengths, params.normalize, valid, term, params.lambda, bufs);
         anneal(st, params, seed, (initial, best), &mut info, out)
     };
     if params.support_px > 0.0 {
@@ -737,13 +736,12 @@ mod tests {
             let params =
                 Params { t_d_px: [2.0, 3.0, 6.0, 1.5][seed as usize], lambda: 0.8, ..Params::default() };
             let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
-            let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
             let term = DistanceTerm::new(params.distance_cap_px());
             let mut st = State::<u16>::scaled(
                 &p1,
                 &p2,
                 [&c.s1, &c.mag],
-                div,
+                true,
                 &c.valid,
                 term,
                 params.lambda,
@@ -774,7 +772,6 @@ mod tests {
             let t_d = [1.0, 2.5, 4.0, 9.0, 12.9, 14.87][seed as usize];
             let params = Params { t_d_px: t_d, lambda: 0.6, ..Params::default() };
             let (p1, p2) = prune(&c.c1, &c.c2, params.t_d_px);
-            let div = [divisor(&c.s1, &p1, true), divisor(&c.mag, &p2, true)];
             let term = DistanceTerm::new(params.distance_cap_px());
             assert!(term.cap2 <= <u8 as Cell>::MAX_CAP2, "seed {seed}: cap {} too large for bytes", term.cap);
             let strengths = [&c.s1, &c.mag];
@@ -782,14 +779,14 @@ mod tests {
                 &p1,
                 &p2,
                 strengths,
-                div,
+                true,
                 &c.valid,
                 term.clone(),
                 0.6,
                 Default::default(),
             );
             let mut b =
-                State::<u16>::scaled(&p1, &p2, strengths, div, &c.valid, term, 0.6, Default::default());
+                State::<u16>::scaled(&p1, &p2, strengths, true, &c.valid, term, 0.6, Default::default());
             let n = a.len();
             assert!(n > 50, "seed {seed}: too few points ({n})");
             let rngs =
@@ -839,12 +836,11 @@ mod tests {
             let ab = external_sum(&p1, &s1n, &p2, &magn);
             let term = || DistanceTerm::new(4.0);
             let a = State::<u8>::new(&p1, &p2, &s1n, &magn, &c.valid, term(), 1.0, ab);
-            let div = [divisor(&c.s1, &p1, normalize), divisor(&c.mag, &p2, normalize)];
             let b = State::<u8>::scaled(
                 &p1,
                 &p2,
                 [&c.s1, &c.mag],
-                div,
+                normalize,
                 &c.valid,
                 term(),
                 1.0,
