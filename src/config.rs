@@ -337,6 +337,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "Default mode: largest distance of a pixel's 3D point to the region's plane.",
     ),
     (
+        "regiongrow.step_tilt",
+        "Default mode, depth in uniform steps: angle limit ≥ this many steps of tilt per pixel, residual limit ≥ one step (0 = off).",
+    ),
+    (
         "regiongrow.residual_rms_ratio",
         "Default mode: the residual limit is max(max_residual, this × the region's own RMS); 0 = max_residual alone.",
     ),

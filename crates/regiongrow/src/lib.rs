@@ -57,6 +57,9 @@ mod testutil;
 use rangeimage::ParamError;
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region, SurfaceFeatures};
 
+/// Stride of the rows [`Params::for_steps`] reads the depth step from (a quarter of them).
+const STEP_STRIDE: usize = 4;
+
 /// How many times `t_sigma` is doubled at most when fewer than `min_seeds` seeds were accepted.
 pub const MAX_RELAXATIONS: u32 = 8;
 
@@ -93,6 +96,12 @@ pub struct Params {
     pub max_angle_deg: f32,
     /// Default mode: maximum distance of a pixel's 3D point to the region's plane, in camera units.
     pub max_residual: f32,
+    /// Default mode, on depth quantised in uniform steps (`planefit::noise::smallest_step`): the normal-angle
+    /// limit is at least the tilt of this many steps per pixel and the residual limit at least one step, both in
+    /// 3D at the image centre and its mean depth (0 = off). A slanted plane in coarse steps is a staircase of
+    /// flat terraces; 0.3 is the slope a 5 × 5 plane fit finds across a single step, so the normals of windows on
+    /// a step edge stay within the limit and the next terrace within the residual.
+    pub step_tilt: f32,
     /// Default mode: the residual limit of growth is `max(max_residual, this × the region's RMS
     /// distance to its own plane)` (0 = `max_residual` alone). The region's own scatter, measured
     /// at each refit, holds the image's noise and what of its surface a plane does not model
@@ -149,6 +158,7 @@ impl Default for Params {
             max_curvedness: 1.0,
             max_angle_deg: 40.0,
             max_residual: 3.0,
+            step_tilt: 0.3,
             residual_rms_ratio: 3.0,
             max_slant_deg: 80.0,
             refit_every_px: 16,
@@ -182,6 +192,43 @@ impl Params {
         }
     }
 
+    /// These parameters with the normal-angle and residual limits raised for the depth steps of `range` (see
+    /// `step_tilt`); unchanged if the depth has no uniform step or `step_tilt` is 0.
+    #[must_use]
+    pub fn for_steps(&self, range: &RangeImage, camera: &Camera) -> Params {
+        let mut p = self.clone();
+        if self.step_tilt <= 0.0 {
+            return p;
+        }
+        let Some(step) = planefit::noise::smallest_step(range, STEP_STRIDE) else { return p };
+        let (w, h) = (range.width() as usize, range.height() as usize);
+        // The mean depth value, from every 16th pixel of every 16th row.
+        let (mut sum, mut n) = (0.0, 0u32);
+        for row in range.as_slice().chunks_exact(w.max(1)).step_by(16) {
+            for &v in row.iter().step_by(16).filter(|v| v.is_finite()) {
+                sum += f64::from(v);
+                n += 1;
+            }
+        }
+        let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n.max(1)));
+        let (Some(p0), Some(right), Some(deeper)) =
+            (camera.point(x, y, v), camera.point(x + 1.0, y, v), camera.point(x, y, v + step))
+        else {
+            return p;
+        };
+        let dist =
+            |a: [f64; 3]| ((a[0] - p0[0]).powi(2) + (a[1] - p0[1]).powi(2) + (a[2] - p0[2]).powi(2)).sqrt();
+        let (step_3d, pitch) = (dist(deeper), dist(right));
+        if !(step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()) {
+            return p;
+        }
+        let tilt_deg = (f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees();
+        tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in uniform steps");
+        p.max_angle_deg = p.max_angle_deg.max(tilt_deg as f32);
+        p.max_residual = p.max_residual.max(step_3d as f32);
+        p
+    }
+
     /// Checks every value; the message names the offending field.
     pub fn validate(&self) -> Result<(), ParamError> {
         let nonneg = [
@@ -190,6 +237,7 @@ impl Params {
             ("regiongrow.max_k_diff", self.max_k_diff),
             ("regiongrow.max_curvedness", self.max_curvedness),
             ("regiongrow.max_residual", self.max_residual),
+            ("regiongrow.step_tilt", self.step_tilt),
             ("regiongrow.residual_rms_ratio", self.residual_rms_ratio),
             ("regiongrow.merge_max_residual", self.merge_max_residual),
             ("regiongrow.merge_joint_rms_ratio", self.merge_joint_rms_ratio),
@@ -323,6 +371,13 @@ pub fn grow_into(
     for (name, ok) in need_sizes {
         assert!(ok, "regiongrow::grow: features.{name} differs in size from the range image");
     }
+    let stepped;
+    let params = if params.mode == Mode::Default && params.step_tilt > 0.0 {
+        stepped = params.for_steps(range, camera);
+        &stepped
+    } else {
+        params
+    };
     // Compiled for the best instruction set of this CPU (bit-identical on every one).
     isa::dispatch(
         #[inline(always)]

@@ -528,3 +528,56 @@ fn region_bits(seg: &Segmentation) -> Vec<u32> {
         })
         .collect()
 }
+
+/// A plane slanted in range value (0.1 and 0.4 range units per pixel), rounded to multiples of `step` without
+/// noise: with step 3, terraces about 7 px wide.
+fn stepped_plane(step: f64) -> RangeImage {
+    Grid::from_fn(120, 100, |x, y| {
+        let v = 60.0 + 0.1 * f64::from(x) + 0.4 * f64::from(y);
+        ((v / step).round() * step) as f32
+    })
+}
+
+#[test]
+fn depth_in_coarse_steps_raises_the_angle_and_residual_limits() {
+    let p = Params::default();
+    // 3 range steps on the ABW camera: 3.8 units of Z against 0.6 units between pixels at this depth.
+    let q = p.for_steps(&stepped_plane(3.0), &Camera::ABW0);
+    assert!(q.max_residual > 3.7 && q.max_residual < 3.9, "one step in 3D: {}", q.max_residual);
+    assert!(
+        q.max_angle_deg > 60.0 && q.max_angle_deg < 65.0,
+        "tilt of 0.3 steps per pixel: {}",
+        q.max_angle_deg
+    );
+    assert_eq!(
+        Params { max_angle_deg: p.max_angle_deg, max_residual: p.max_residual, ..q },
+        p,
+        "nothing else"
+    );
+    // 1-step rounding (real ABW): a tilt of about 32°, under the limit; continuous depth; the rule off.
+    assert_eq!(p.for_steps(&stepped_plane(1.0), &Camera::ABW0), p);
+    let continuous = Grid::from_fn(120, 100, |x, y| 60.0 + 0.35 * x as f32 + 0.01 * ((x * y) % 7) as f32);
+    assert_eq!(p.for_steps(&continuous, &Camera::ABW0), p);
+    let off = Params { step_tilt: 0.0, ..p.clone() };
+    assert_eq!(off.for_steps(&stepped_plane(3.0), &Camera::ABW0), off);
+}
+
+#[test]
+fn a_plane_in_coarse_steps_grows_as_one_region() {
+    // Without the raised limits the terraces' 5 × 5 normals (flat on a terrace, steep across its edge) and the
+    // 3.8-unit steps between terraces stop growth at every terrace edge.
+    let range = stepped_plane(3.0);
+    let feats = features::compute(&range, &features::Params::default());
+    let largest = |p: &Params| {
+        let (seg, _) = grow(&range, &feats, &Camera::ABW0, p, 1);
+        let mut counts = std::collections::BTreeMap::new();
+        for &l in seg.labels.as_slice().iter().filter(|&&l| l != 0) {
+            *counts.entry(l).or_insert(0usize) += 1;
+        }
+        counts.values().copied().max().unwrap_or(0) as f64 / range.len() as f64
+    };
+    let on = largest(&small_params());
+    let off = largest(&Params { step_tilt: 0.0, ..small_params() });
+    assert!(on > 0.95, "with the step limits the largest region holds {on} of the plane");
+    assert!(off < 0.5, "without, {off}");
+}
