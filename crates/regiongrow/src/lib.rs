@@ -200,7 +200,8 @@ impl Params {
         if self.step_tilt <= 0.0 {
             return p;
         }
-        let Some(step) = planefit::noise::smallest_step(range, STEP_STRIDE) else { return p };
+        // The smallest difference first; whether it is the step (a second pass) only if it would change a limit.
+        let Some(step) = planefit::noise::smallest_difference(range, STEP_STRIDE) else { return p };
         let (w, h) = (range.width() as usize, range.height() as usize);
         // The mean depth value, from every 16th pixel of every 16th row.
         let (mut sum, mut n) = (0.0, 0u32);
@@ -222,9 +223,13 @@ impl Params {
         if !(step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()) {
             return p;
         }
-        let tilt_deg = (f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees();
+        let tilt_deg = ((f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees()) as f32;
+        let raises = tilt_deg > p.max_angle_deg || step_3d as f32 > p.max_residual;
+        if !raises || !planefit::noise::is_step(range, STEP_STRIDE, step) {
+            return p;
+        }
         tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in uniform steps");
-        p.max_angle_deg = p.max_angle_deg.max(tilt_deg as f32);
+        p.max_angle_deg = p.max_angle_deg.max(tilt_deg);
         p.max_residual = p.max_residual.max(step_3d as f32);
         p
     }
