@@ -211,7 +211,10 @@ impl Params {
                 n += 1;
             }
         }
-        let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n.max(1)));
+        if n == 0 {
+            return p;
+        }
+        let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n));
         let (Some(p0), Some(right), Some(deeper)) =
             (camera.point(x, y, v), camera.point(x + 1.0, y, v), camera.point(x, y, v + step))
         else {
