@@ -9,7 +9,7 @@ use std::path::Path;
 /// Writes `labels` as an ABW `.ms-seg` (renumbered from 10 as the format needs), the regions' normals as a
 /// `.ms-nor` under the same labels, and every label unchanged as a 16-bit gray PNG beside the `.ms-seg`
 /// (`NAME.labels.png`, 0 = none), which keeps the regions the `.ms-seg`'s 246-region cap drops;
-/// returns the `(label, written label)` pairs of the `.ms-seg`.
+/// returns what the `.ms-seg` holds.
 ///
 /// Regions lost to the cap are reported with `tracing::warn!` (see [`ms_seg_cap_loss`]).
 pub fn write_segmentation(
@@ -17,7 +17,7 @@ pub fn write_segmentation(
     nor_path: &Path,
     labels: &LabelImage,
     regions: &[Region],
-) -> Result<Vec<(u32, u8)>, rangeio::WriteError> {
+) -> Result<MsSegWritten, rangeio::WriteError> {
     let labels_path = labels_png_path(seg_path);
     rangeio::png::write_label16_png(&labels_path, labels)?;
     let mapping = rangeio::abw::write_labels(seg_path, labels)?;
@@ -37,7 +37,18 @@ pub fn write_segmentation(
             labels_path.display()
         );
     }
-    Ok(mapping)
+    Ok(MsSegWritten { mapping, lost_regions: lost, lost_px })
+}
+
+/// What [`write_segmentation`] wrote to the `.ms-seg`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MsSegWritten {
+    /// The `(label, written label)` pairs of the `.ms-seg`.
+    pub mapping: Vec<(u32, u8)>,
+    /// Regions the 246-region cap left out of it ([`ms_seg_cap_loss`]).
+    pub lost_regions: usize,
+    /// Their pixels, 0 in it.
+    pub lost_px: u64,
 }
 
 /// `NAME.labels.png` beside `NAME.ms-seg`.
@@ -145,7 +156,7 @@ pub fn write_selected_outputs(
 ) -> Result<serde_json::Value, rangeio::WriteError> {
     let _s = tracing::info_span!("write_outputs", stem).entered();
     let path = |ext: &str| dir.join(format!("{stem}.{ext}"));
-    let mapping = if which.ms_seg {
+    let ms_seg = if which.ms_seg {
         Some(write_segmentation(&path("ms-seg"), &path("ms-nor"), &out.fin.labels, &out.fin.final_regions)?)
     } else {
         None
@@ -167,7 +178,7 @@ pub fn write_selected_outputs(
         write_planes_json(&path("planes.json"), &frame.camera, &planes)?;
     }
 
-    let cap = mapping.as_ref().map(|m| (m.len(), ms_seg_cap_loss(&out.fin.labels, m)));
+    let cap = ms_seg.as_ref().map(|m| (m.mapping.len(), (m.lost_regions, m.lost_px)));
     let count = |e: &rangeimage::EdgeMap| e.as_slice().iter().filter(|&&b| b).count();
     let info = &out.fin.relax_info;
     Ok(serde_json::json!({

@@ -38,7 +38,8 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     let path = |ext: &str| args.out.join(format!("{name}.{ext}"));
     let mapping =
-        rangeseg::output::write_segmentation(&path("ms-seg"), &path("ms-nor"), &seg.labels, &seg.regions)?;
+        rangeseg::output::write_segmentation(&path("ms-seg"), &path("ms-nor"), &seg.labels, &seg.regions)?
+            .mapping;
     rangeio::png::write_edge_png(&path("c1.png"), &seg.c1)?;
     rangeio::png::write_label_png(&path("regions.png"), &seg.labels)?;
 
