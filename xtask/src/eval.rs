@@ -14,9 +14,11 @@ struct Options {
     config: PathBuf,
     data: DataSpec,
     out: PathBuf,
+    /// Runs with the seeds `seed … seed + seeds − 1` (see [`crate::seeds`]).
+    seeds: u32,
 }
 
-const EVAL_USAGE: &str = "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM] [--depth-scale M]] [--out DIR]";
+const EVAL_USAGE: &str = "usage: cargo xtask eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM] [--depth-scale M]] [--out DIR] [--seeds N]";
 
 fn parse(root: &Path, args: &[String]) -> Result<Options> {
     let (mut specs, rest) = data::parse_specs(args)?;
@@ -24,13 +26,20 @@ fn parse(root: &Path, args: &[String]) -> Result<Options> {
         bail!("eval reads one data set; run it once per --data\n{EVAL_USAGE}");
     }
     let data = specs.pop().unwrap_or_else(DataSpec::synthetic);
-    let mut o = Options { config: root.join("configs/default.toml"), data, out: root.join("target/eval") };
+    let mut o =
+        Options { config: root.join("configs/default.toml"), data, out: root.join("target/eval"), seeds: 1 };
     let mut it = rest.iter();
     while let Some(a) = it.next() {
         let mut value = || it.next().cloned().with_context(|| format!("{a} needs a value"));
         match a.as_str() {
             "--config" => o.config = value()?.into(),
             "--out" => o.out = value()?.into(),
+            "--seeds" => {
+                let v = value()?;
+                o.seeds = v.parse().ok().filter(|&n| (1..=100).contains(&n)).with_context(|| {
+                    format!("--seeds {v}: expected a number of runs from 1 to 100\n{EVAL_USAGE}")
+                })?;
+            }
             other => bail!("unknown option {other}\n{EVAL_USAGE}"),
         }
     }
@@ -88,6 +97,15 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     };
     report::write_all(&report, &o.out)?;
     eprintln!("{}", report::summary(&report));
+    if o.seeds > 1 {
+        let mut first = crate::seeds::Totals { seed: config.seed, ..Default::default() };
+        for r in &report.rows {
+            first.add(&r.scores.hoover_final, &r.scores.hoover_regiongrow, &r.scores.jin_final);
+        }
+        let mut runs = vec![first];
+        runs.extend(crate::seeds::other_seeds(&set, &config, o.seeds)?);
+        eprintln!("{}", crate::seeds::report(&set.name, &runs, &o.out)?);
+    }
     eprintln!("wrote {}", o.out.join("report.html").display());
     Ok(())
 }

@@ -5,6 +5,7 @@ pub mod data;
 pub mod eval;
 pub mod gen_data;
 mod report;
+mod seeds;
 pub mod tidy;
 pub mod tune;
 
