@@ -494,7 +494,7 @@ pub(crate) fn run(
     let mut merged_again = false;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
-    let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
+    let (used, n_dropped) = drop_small(mbufs, params.min_region_px, labels);
     info.n_dropped = n_dropped;
     fresh &= n_dropped == 0;
     if params.fill_unlabelled {
@@ -658,25 +658,29 @@ enum Stale<'a> {
     All,
 }
 
-/// Unlabels the regions of fewer than `min` pixels. Returns which labels are still in the image and how many
-/// were dropped.
-fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
-    let mut keep = vec![false; stats.len()];
-    for (l, s) in stats.iter().enumerate().skip(1) {
-        // Only roots still carry their pixels; merged-away labels no longer occur in `labels`.
-        keep[l] = s.count >= min;
+/// After a [`merge`] into `bufs`, unlabels the regions of fewer than `min` pixels. Returns which labels are still
+/// in the image and how many were dropped.
+///
+/// The labels present are the merge's roots with pixels (growth gave every label its seed, and the merge rewrote
+/// merged labels to their roots), so only a frame that drops a region is scanned, branch-free.
+fn drop_small(bufs: &MergeBufs, min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
+    let stats = &bufs.stats;
+    let present: Vec<bool> =
+        (0..stats.len()).map(|l| l > 0 && stats[l].count > 0 && bufs.is_root(l)).collect();
+    #[cfg(test)]
+    {
+        let mut scanned = vec![false; stats.len()];
+        labels.iter().filter(|&&l| l != 0).for_each(|&l| scanned[l as usize] = true);
+        assert_eq!(present, scanned, "labels present");
     }
-    let mut present = vec![false; stats.len()];
-    for l in labels.iter_mut() {
-        if *l != 0 {
-            present[*l as usize] = true;
-            if !keep[*l as usize] {
-                *l = 0;
-            }
+    // Label 0 is not used, so it stays 0.
+    let used: Vec<bool> = present.iter().zip(stats).map(|(&p, s)| p & (s.count >= min)).collect();
+    let n_dropped = present.iter().zip(&used).filter(|&(&p, &u)| p & !u).count() as u32;
+    if n_dropped > 0 {
+        for l in labels.iter_mut() {
+            *l = if used[*l as usize] { *l } else { 0 };
         }
     }
-    let n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
-    let used = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
     (used, n_dropped)
 }
 

@@ -282,6 +282,11 @@ impl MergeBufs {
         self.dirty.reserve(n);
     }
 
+    /// Whether label `l` is a root of the last [`merge`] (not merged into another label).
+    pub(crate) fn is_root(&self, l: usize) -> bool {
+        self.parent[l] as usize == l
+    }
+
     /// After a [`merge`] of labels `0..=max_label` that merged (its root table is left in `parent`): marks in
     /// `dirty` the labels whose pixels changed, the merged-away ones and the roots that took them in. The others
     /// keep in `stats` the raster-order statistics of the merge's input, which are those of its output.
