@@ -463,16 +463,25 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
         let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
         let mut x = 0;
         if !eight && !below.is_empty() {
-            // Skip runs of 16 pixels none of which forms a pair with its right or lower neighbour (two
-            // different nonzero labels), the test of `scan` evaluated without branches.
+            // 16 pixels at a time: the test of `scan` (two different nonzero labels) with the right and the lower
+            // neighbour evaluated without branches into two bit masks, and a pair pushed per bit set (the order
+            // of the pushes does not matter: the pairs are sorted below).
             while x + CHUNK < width {
-                let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
+                let r: &[u32; CHUNK] = row[x..x + CHUNK].try_into().expect("CHUNK labels");
+                let rr: &[u32; CHUNK] = row[x + 1..x + CHUNK + 1].try_into().expect("CHUNK labels");
+                let b: &[u32; CHUNK] = below[x..x + CHUNK].try_into().expect("CHUNK labels");
                 let pair = |p: u32, q: u32| u32::from(p != 0) & u32::from(q != 0) & u32::from(p != q);
-                let any =
-                    r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | pair(p, q) | pair(p, s));
-                if any != 0 {
-                    for xx in x..x + CHUNK {
-                        scan(row, below, xx, pairs);
+                let (mut right, mut down) = (0u32, 0u32);
+                for k in 0..CHUNK {
+                    right |= pair(r[k], rr[k]) << k;
+                    down |= pair(r[k], b[k]) << k;
+                }
+                for (mut mask, other) in [(right, rr), (down, b)] {
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let (p, q) = (r[k], other[k]);
+                        pairs.push((p.min(q), p.max(q)));
                     }
                 }
                 x += CHUNK;
@@ -482,7 +491,8 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
             scan(row, below, xx, pairs);
         }
     }
-    pairs.sort_unstable();
+    // The order of the tuples, compared as one integer.
+    pairs.sort_unstable_by_key(|&(a, b)| (u64::from(a) << 32) | u64::from(b));
     pairs.dedup();
 }
 
