@@ -211,7 +211,7 @@ impl Criterion {
         if smallest_axis_exceeds(&joint, limit * limit) {
             return None;
         }
-        let rms = Plane::fit(&joint, |_| pa.normal)?.mean_sq.max(0.0).sqrt();
+        let rms = Plane::fit_mean_sq(&joint)?.max(0.0).sqrt();
         (rms <= limit && limit > 0.0).then(|| 1.0 + rms / limit)
     }
 
