@@ -597,16 +597,8 @@ fn seed_and_grow(
         let t_round = if last { f32::INFINITY } else { t };
         // The last round falls back to every pixel and no neighbourhood test.
         let (st, of, radius) = if last { (1, 0, 0) } else { (stride, off, params.seed_radius_px as usize) };
-        cand.clear();
-        for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
-            for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
-                let pi = ctx.pad(x, y);
-                // Label 0 = unlabelled and growable.
-                if labels[pi] == 0 && k_std[y * w + x] <= t_round {
-                    cand.push(pi as u32);
-                }
-            }
-        }
+        let n_cand = seed_candidates(labels, k_std, (w, h), (st, of), t_round, cand);
+        let cand = &mut cand[..n_cand];
         for i in (1..cand.len()).rev() {
             let j = rng.random_range(0..=i as u32) as usize;
             cand.swap(i, j);
@@ -645,6 +637,53 @@ fn seed_and_grow(
         }
     }
     next
+}
+
+/// Writes to `cand[..n]` the padded indices of the seed candidates of a `w × h` frame, in raster order, and returns
+/// `n`: the pixels on the grid of stride `st` from `(of, of)` (clamped into the image) that are unlabelled and
+/// growable (label 0) with `k_std ≤ t`. `cand` keeps at least `w·h` elements (values past `n` are left over).
+/// Stride 1 (the default) writes every pixel's index and advances by the test's outcome, without branches (a test
+/// compares with the pixel-by-pixel loop).
+#[inline(always)] // into `run`, compiled for each instruction set
+fn seed_candidates(
+    labels: &[u32],
+    k_std: &[f32],
+    (w, h): (usize, usize),
+    (st, of): (usize, usize),
+    t: f32,
+    cand: &mut Vec<u32>,
+) -> usize {
+    let pw = w + 2;
+    if cand.len() < w * h {
+        cand.resize(w * h, 0);
+    }
+    let mut n = 0;
+    if st == 1 {
+        for y in 0..h {
+            let src = (y + 1) * pw + 1;
+            let (lrow, krow) = (&labels[src..src + w], &k_std[y * w..(y + 1) * w]);
+            // At most `y·w` candidates precede this row, so its (at most `w`) fit.
+            let out = &mut cand[n..n + w];
+            let mut m = 0;
+            for (x, (&l, &k)) in lrow.iter().zip(krow).enumerate() {
+                out[m] = (src + x) as u32;
+                m += usize::from((l == 0) & (k <= t));
+            }
+            n += m;
+        }
+        return n;
+    }
+    for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
+        for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
+            let pi = (y + 1) * pw + x + 1;
+            // Label 0 = unlabelled and growable.
+            if labels[pi] == 0 && k_std[y * w + x] <= t {
+                cand[n] = pi as u32;
+                n += 1;
+            }
+        }
+    }
+    n
 }
 
 /// Which statistics of the last merge are not those of the current labels (see [`relabel_into`]).
@@ -1102,6 +1141,45 @@ mod tests {
                 fill_starts(&labels, &geo, (w, h), &mut queue);
                 assert_eq!(queue, reference, "{w}x{h}, {zero_share}");
             }
+        }
+    }
+
+    /// `seed_candidates` gives the candidates of the pixel-by-pixel loop, in the same order, on random grids
+    /// (labels 0, `BLOCKED` or a region, NaN and random `k_std`), every stride and offset, in a buffer of
+    /// other values.
+    #[test]
+    fn seed_candidates_match_the_pixel_by_pixel_loop() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+        let mut cand = vec![u32::MAX; 3];
+        for case in 0..300 {
+            let (w, h) = (rng.random_range(1..40usize), rng.random_range(1..30usize));
+            let pw = w + 2;
+            let zero_share = [0.05, 0.5, 0.95, 1.0][case % 4];
+            let labels: Vec<u32> = (0..pw * (h + 2))
+                .map(|_| match rng.random::<f64>() {
+                    r if r < zero_share => 0,
+                    r if r < 0.5 + zero_share / 2.0 => BLOCKED,
+                    _ => rng.random_range(1..9),
+                })
+                .collect();
+            let k_std: Vec<f32> =
+                (0..w * h).map(|i| if i % 13 == 5 { f32::NAN } else { rng.random_range(0.0..0.2) }).collect();
+            let (st, of) =
+                if case % 3 == 0 { (rng.random_range(2..5), rng.random_range(0..4)) } else { (1, 0) };
+            let t = [0.1, f32::INFINITY][case % 2];
+            let mut want = Vec::new();
+            for y in (of.min(h - 1)..h).step_by(st) {
+                for x in (of.min(w - 1)..w).step_by(st) {
+                    let pi = (y + 1) * pw + x + 1;
+                    if labels[pi] == 0 && k_std[y * w + x] <= t {
+                        want.push(pi as u32);
+                    }
+                }
+            }
+            let n = seed_candidates(&labels, &k_std, (w, h), (st, of), t, &mut cand);
+            assert_eq!(&cand[..n], &want[..], "case {case}: {w}x{h}, stride {st}, offset {of}");
+            cand.iter_mut().for_each(|c| *c = 7);
         }
     }
 
