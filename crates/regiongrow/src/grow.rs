@@ -485,7 +485,9 @@ pub(crate) fn run(
 
     // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
     let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+    // The regions under `min_region_px` are dropped (unlabelled) by the merge's final rewrite of the labels.
+    let min_px = params.min_region_px;
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, min_px, &toward, mbufs);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
     // Whether `mbufs.stats` are the statistics of the current labels (as `region_stats_into` gives them): a merge
@@ -494,7 +496,14 @@ pub(crate) fn run(
     let mut merged_again = false;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
-    let (used, n_dropped) = drop_small(mbufs, params.min_region_px, labels);
+    let (used, n_dropped) = dropped(mbufs, min_px);
+    #[cfg(test)]
+    {
+        // `used` names the labels left in the image (checked by every test of the crate).
+        let mut scanned = vec![false; used.len()];
+        labels.iter().filter(|&&l| l != 0).for_each(|&l| scanned[l as usize] = true);
+        assert_eq!(used, scanned, "labels left");
+    }
     info.n_dropped = n_dropped;
     fresh &= n_dropped == 0;
     if params.fill_unlabelled {
@@ -502,7 +511,7 @@ pub(crate) fn run(
         fresh &= info.n_filled_px == 0;
         if params.merge_after_fill && info.n_filled_px > 0 {
             // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, 0, &toward, mbufs);
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
             fresh = again.n_merged == 0;
@@ -697,29 +706,16 @@ enum Stale<'a> {
     All,
 }
 
-/// After a [`merge`] into `bufs`, unlabels the regions of fewer than `min` pixels. Returns which labels are still
-/// in the image and how many were dropped.
-///
-/// The labels present are the merge's roots with pixels (growth gave every label its seed, and the merge rewrote
-/// merged labels to their roots), so only a frame that drops a region is scanned, branch-free.
-fn drop_small(bufs: &MergeBufs, min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
+/// After a [`merge`] into `bufs` that unlabelled the regions of fewer than `min` pixels: which labels are still in
+/// the image, and how many regions were dropped (the merge's roots with pixels, under `min`). Growth gave every
+/// label its seed, so the labels present before the drop are the roots with pixels.
+fn dropped(bufs: &MergeBufs, min: u32) -> (Vec<bool>, u32) {
     let stats = &bufs.stats;
     let present: Vec<bool> =
         (0..stats.len()).map(|l| l > 0 && stats[l].count > 0 && bufs.is_root(l)).collect();
-    #[cfg(test)]
-    {
-        let mut scanned = vec![false; stats.len()];
-        labels.iter().filter(|&&l| l != 0).for_each(|&l| scanned[l as usize] = true);
-        assert_eq!(present, scanned, "labels present");
-    }
-    // Label 0 is not used, so it stays 0.
+    // Label 0 is not used.
     let used: Vec<bool> = present.iter().zip(stats).map(|(&p, s)| p & (s.count >= min)).collect();
     let n_dropped = present.iter().zip(&used).filter(|&(&p, &u)| p & !u).count() as u32;
-    if n_dropped > 0 {
-        for l in labels.iter_mut() {
-            *l = if used[*l as usize] { *l } else { 0 };
-        }
-    }
     (used, n_dropped)
 }
 
