@@ -485,7 +485,9 @@ pub(crate) fn run(
 
     // Merge (on the padded grid: the frame is label 0, so it adds no adjacency).
     let toward = |p: [f64; 3]| ctx.toward(p);
-    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+    // The regions under `min_region_px` are dropped (unlabelled) by the merge's final rewrite of the labels.
+    let min_px = params.min_region_px;
+    let merged = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, min_px, &toward, mbufs);
     info.n_merged = merged.n_merged;
     info.n_merge_passes = merged.n_passes;
     // Whether `mbufs.stats` are the statistics of the current labels (as `region_stats_into` gives them): a merge
@@ -494,7 +496,14 @@ pub(crate) fn run(
     let mut merged_again = false;
     tracing::debug!(merged = info.n_merged, passes = info.n_merge_passes, "merged");
 
-    let (used, n_dropped) = drop_small(&mbufs.stats, params.min_region_px, labels);
+    let (used, n_dropped) = dropped(mbufs, min_px);
+    #[cfg(test)]
+    {
+        // `used` names the labels left in the image (checked by every test of the crate).
+        let mut scanned = vec![false; used.len()];
+        labels.iter().filter(|&&l| l != 0).for_each(|&l| scanned[l as usize] = true);
+        assert_eq!(used, scanned, "labels left");
+    }
     info.n_dropped = n_dropped;
     fresh &= n_dropped == 0;
     if params.fill_unlabelled {
@@ -502,7 +511,7 @@ pub(crate) fn run(
         fresh &= info.n_filled_px == 0;
         if params.merge_after_fill && info.n_filled_px > 0 {
             // Regions that a band of non-growable pixels kept apart touch now: merge again.
-            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, &toward, mbufs);
+            let again = merge(labels, next - 1, pw, ctx.eight, ctx.geo, ctx.k, params, 0, &toward, mbufs);
             info.n_merged += again.n_merged;
             info.n_merge_passes += again.n_passes;
             fresh = again.n_merged == 0;
@@ -597,16 +606,8 @@ fn seed_and_grow(
         let t_round = if last { f32::INFINITY } else { t };
         // The last round falls back to every pixel and no neighbourhood test.
         let (st, of, radius) = if last { (1, 0, 0) } else { (stride, off, params.seed_radius_px as usize) };
-        cand.clear();
-        for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
-            for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
-                let pi = ctx.pad(x, y);
-                // Label 0 = unlabelled and growable.
-                if labels[pi] == 0 && k_std[y * w + x] <= t_round {
-                    cand.push(pi as u32);
-                }
-            }
-        }
+        let n_cand = seed_candidates(labels, k_std, (w, h), (st, of), t_round, cand);
+        let cand = &mut cand[..n_cand];
         for i in (1..cand.len()).rev() {
             let j = rng.random_range(0..=i as u32) as usize;
             cand.swap(i, j);
@@ -647,6 +648,53 @@ fn seed_and_grow(
     next
 }
 
+/// Writes to `cand[..n]` the padded indices of the seed candidates of a `w × h` frame, in raster order, and returns
+/// `n`: the pixels on the grid of stride `st` from `(of, of)` (clamped into the image) that are unlabelled and
+/// growable (label 0) with `k_std ≤ t`. `cand` keeps at least `w·h` elements (values past `n` are left over).
+/// Stride 1 (the default) writes every pixel's index and advances by the test's outcome, without branches (a test
+/// compares with the pixel-by-pixel loop).
+#[inline(always)] // into `run`, compiled for each instruction set
+fn seed_candidates(
+    labels: &[u32],
+    k_std: &[f32],
+    (w, h): (usize, usize),
+    (st, of): (usize, usize),
+    t: f32,
+    cand: &mut Vec<u32>,
+) -> usize {
+    let pw = w + 2;
+    if cand.len() < w * h {
+        cand.resize(w * h, 0);
+    }
+    let mut n = 0;
+    if st == 1 {
+        for y in 0..h {
+            let src = (y + 1) * pw + 1;
+            let (lrow, krow) = (&labels[src..src + w], &k_std[y * w..(y + 1) * w]);
+            // At most `y·w` candidates precede this row, so its (at most `w`) fit.
+            let out = &mut cand[n..n + w];
+            let mut m = 0;
+            for (x, (&l, &k)) in lrow.iter().zip(krow).enumerate() {
+                out[m] = (src + x) as u32;
+                m += usize::from((l == 0) & (k <= t));
+            }
+            n += m;
+        }
+        return n;
+    }
+    for y in (of.min(h.saturating_sub(1))..h).step_by(st) {
+        for x in (of.min(w.saturating_sub(1))..w).step_by(st) {
+            let pi = (y + 1) * pw + x + 1;
+            // Label 0 = unlabelled and growable.
+            if labels[pi] == 0 && k_std[y * w + x] <= t {
+                cand[n] = pi as u32;
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
 /// Which statistics of the last merge are not those of the current labels (see [`relabel_into`]).
 #[derive(Debug, Clone, Copy)]
 enum Stale<'a> {
@@ -658,25 +706,16 @@ enum Stale<'a> {
     All,
 }
 
-/// Unlabels the regions of fewer than `min` pixels. Returns which labels are still in the image and how many
-/// were dropped.
-fn drop_small(stats: &[Stats], min: u32, labels: &mut [u32]) -> (Vec<bool>, u32) {
-    let mut keep = vec![false; stats.len()];
-    for (l, s) in stats.iter().enumerate().skip(1) {
-        // Only roots still carry their pixels; merged-away labels no longer occur in `labels`.
-        keep[l] = s.count >= min;
-    }
-    let mut present = vec![false; stats.len()];
-    for l in labels.iter_mut() {
-        if *l != 0 {
-            present[*l as usize] = true;
-            if !keep[*l as usize] {
-                *l = 0;
-            }
-        }
-    }
-    let n_dropped = (1..stats.len()).filter(|&l| present[l] && !keep[l]).count() as u32;
-    let used = present.iter().zip(&keep).map(|(&p, &k)| p & k).collect();
+/// After a [`merge`] into `bufs` that unlabelled the regions of fewer than `min` pixels: which labels are still in
+/// the image, and how many regions were dropped (the merge's roots with pixels, under `min`). Growth gave every
+/// label its seed, so the labels present before the drop are the roots with pixels.
+fn dropped(bufs: &MergeBufs, min: u32) -> (Vec<bool>, u32) {
+    let stats = &bufs.stats;
+    let present: Vec<bool> =
+        (0..stats.len()).map(|l| l > 0 && stats[l].count > 0 && bufs.is_root(l)).collect();
+    // Label 0 is not used.
+    let used: Vec<bool> = present.iter().zip(stats).map(|(&p, s)| p & (s.count >= min)).collect();
+    let n_dropped = present.iter().zip(&used).filter(|&(&p, &u)| p & !u).count() as u32;
     (used, n_dropped)
 }
 
@@ -1098,6 +1137,45 @@ mod tests {
                 fill_starts(&labels, &geo, (w, h), &mut queue);
                 assert_eq!(queue, reference, "{w}x{h}, {zero_share}");
             }
+        }
+    }
+
+    /// `seed_candidates` gives the candidates of the pixel-by-pixel loop, in the same order, on random grids
+    /// (labels 0, `BLOCKED` or a region, NaN and random `k_std`), every stride and offset, in a buffer of
+    /// other values.
+    #[test]
+    fn seed_candidates_match_the_pixel_by_pixel_loop() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+        let mut cand = vec![u32::MAX; 3];
+        for case in 0..300 {
+            let (w, h) = (rng.random_range(1..40usize), rng.random_range(1..30usize));
+            let pw = w + 2;
+            let zero_share = [0.05, 0.5, 0.95, 1.0][case % 4];
+            let labels: Vec<u32> = (0..pw * (h + 2))
+                .map(|_| match rng.random::<f64>() {
+                    r if r < zero_share => 0,
+                    r if r < 0.5 + zero_share / 2.0 => BLOCKED,
+                    _ => rng.random_range(1..9),
+                })
+                .collect();
+            let k_std: Vec<f32> =
+                (0..w * h).map(|i| if i % 13 == 5 { f32::NAN } else { rng.random_range(0.0..0.2) }).collect();
+            let (st, of) =
+                if case % 3 == 0 { (rng.random_range(2..5), rng.random_range(0..4)) } else { (1, 0) };
+            let t = [0.1, f32::INFINITY][case % 2];
+            let mut want = Vec::new();
+            for y in (of.min(h - 1)..h).step_by(st) {
+                for x in (of.min(w - 1)..w).step_by(st) {
+                    let pi = (y + 1) * pw + x + 1;
+                    if labels[pi] == 0 && k_std[y * w + x] <= t {
+                        want.push(pi as u32);
+                    }
+                }
+            }
+            let n = seed_candidates(&labels, &k_std, (w, h), (st, of), t, &mut cand);
+            assert_eq!(&cand[..n], &want[..], "case {case}: {w}x{h}, stride {st}, offset {of}");
+            cand.iter_mut().for_each(|c| *c = 7);
         }
     }
 

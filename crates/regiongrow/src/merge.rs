@@ -211,7 +211,7 @@ impl Criterion {
         if smallest_axis_exceeds(&joint, limit * limit) {
             return None;
         }
-        let rms = Plane::fit(&joint, |_| pa.normal)?.mean_sq.max(0.0).sqrt();
+        let rms = Plane::fit_mean_sq(&joint)?.max(0.0).sqrt();
         (rms <= limit && limit > 0.0).then(|| 1.0 + rms / limit)
     }
 
@@ -258,6 +258,8 @@ pub(crate) struct MergeBufs {
     /// Per label: its statistics changed (a region merged into it) during the current pass.
     changed: Vec<bool>,
     cand: Vec<(f64, u32, u32, u32, u32)>,
+    /// Per label: the label its pixels get at the end of [`merge`].
+    map: Vec<u32>,
     /// Per label: its pixels changed in the last [`merge`] ([`MergeBufs::mark_merged`]).
     pub(crate) dirty: Vec<bool>,
 }
@@ -280,6 +282,13 @@ impl MergeBufs {
         self.changed.reserve(n);
         self.dirty.clear();
         self.dirty.reserve(n);
+        self.map.clear();
+        self.map.reserve(n);
+    }
+
+    /// Whether label `l` is a root of the last [`merge`] (not merged into another label).
+    pub(crate) fn is_root(&self, l: usize) -> bool {
+        self.parent[l] as usize == l
     }
 
     /// After a [`merge`] of labels `0..=max_label` that merged (its root table is left in `parent`): marks in
@@ -308,7 +317,8 @@ pub(crate) struct Merged {
 }
 
 /// Merges adjacent similar regions of `labels` (values `0..=max_label`, 0 = none) until a full
-/// pass merges nothing, and rewrites `labels` with the surviving labels.
+/// pass merges nothing, and rewrites `labels` with the surviving labels, or 0 for the regions of fewer than
+/// `min_keep` pixels (a pass over the pixels only when a label changes).
 ///
 /// Candidate pairs are processed in order of (score, first pixel of either region); the surviving
 /// label of a union is the one whose region starts first in raster order. Nothing depends on the
@@ -327,10 +337,11 @@ pub(crate) fn merge<const N: usize>(
     pts: &[[f32; N]],
     k: &[f32],
     params: &Params,
+    min_keep: u32,
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
     bufs: &mut MergeBufs,
 ) -> Merged {
-    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, .. } = bufs;
+    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, map, .. } = bufs;
     region_stats_into(labels, max_label, pts, k, stats);
     let crit = Criterion::new(params);
     let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
@@ -408,16 +419,33 @@ pub(crate) fn merge<const N: usize>(
         graph.dedup_by_key(|e| e.0);
         changed.fill(false);
     }
-    if n_merged > 0 {
-        // Every label's root once, then one table look-up per pixel (label 0 is its own root).
-        for l in 0..=max_label {
-            parent[l as usize] = find(parent, l);
-        }
+    rewrite(labels, max_label, min_keep, (stats, parent, map));
+    Merged { n_merged, n_passes }
+}
+
+/// The end of [`merge`]: every label's root once into `parent` (label 0 is its own root) and the label it becomes
+/// into `map` (its root, or 0 where the root has fewer than `min_keep` pixels), then, if that changes a label, one
+/// table look-up per pixel.
+fn rewrite(
+    labels: &mut [u32],
+    max_label: u32,
+    min_keep: u32,
+    (stats, parent, map): (&[Stats], &mut [u32], &mut Vec<u32>),
+) {
+    map.clear();
+    let mut changes = false;
+    for l in 0..=max_label {
+        let r = find(parent, l);
+        parent[l as usize] = r;
+        let to = if stats[r as usize].count >= min_keep { r } else { 0 };
+        changes |= to != l;
+        map.push(to);
+    }
+    if changes {
         for l in labels.iter_mut() {
-            *l = parent[*l as usize];
+            *l = map[*l as usize];
         }
     }
-    Merged { n_merged, n_passes }
 }
 
 /// The region adjacency graph of `labels` (rows of `width`) into `pairs`: every pair `(a, b)`,
@@ -458,16 +486,25 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
         let below = if y + 1 < height { &labels[(y + 1) * width..(y + 2) * width] } else { &[][..] };
         let mut x = 0;
         if !eight && !below.is_empty() {
-            // Skip runs of 16 pixels none of which forms a pair with its right or lower neighbour (two
-            // different nonzero labels), the test of `scan` evaluated without branches.
+            // 16 pixels at a time: the test of `scan` (two different nonzero labels) with the right and the lower
+            // neighbour evaluated without branches into two bit masks, and a pair pushed per bit set (the order
+            // of the pushes does not matter: the pairs are sorted below).
             while x + CHUNK < width {
-                let (r, rr, b) = (&row[x..x + CHUNK], &row[x + 1..x + CHUNK + 1], &below[x..x + CHUNK]);
+                let r: &[u32; CHUNK] = row[x..x + CHUNK].try_into().expect("CHUNK labels");
+                let rr: &[u32; CHUNK] = row[x + 1..x + CHUNK + 1].try_into().expect("CHUNK labels");
+                let b: &[u32; CHUNK] = below[x..x + CHUNK].try_into().expect("CHUNK labels");
                 let pair = |p: u32, q: u32| u32::from(p != 0) & u32::from(q != 0) & u32::from(p != q);
-                let any =
-                    r.iter().zip(rr).zip(b).fold(0u32, |acc, ((&p, &q), &s)| acc | pair(p, q) | pair(p, s));
-                if any != 0 {
-                    for xx in x..x + CHUNK {
-                        scan(row, below, xx, pairs);
+                let (mut right, mut down) = (0u32, 0u32);
+                for k in 0..CHUNK {
+                    right |= pair(r[k], rr[k]) << k;
+                    down |= pair(r[k], b[k]) << k;
+                }
+                for (mut mask, other) in [(right, rr), (down, b)] {
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let (p, q) = (r[k], other[k]);
+                        pairs.push((p.min(q), p.max(q)));
                     }
                 }
                 x += CHUNK;
@@ -477,7 +514,8 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
             scan(row, below, xx, pairs);
         }
     }
-    pairs.sort_unstable();
+    // The order of the tuples, compared as one integer.
+    pairs.sort_unstable_by_key(|&(a, b)| (u64::from(a) << 32) | u64::from(b));
     pairs.dedup();
 }
 
@@ -525,6 +563,7 @@ mod tests {
                 &pts,
                 s.features.k.as_slice(),
                 &params,
+                0,
                 &toward,
                 &mut Default::default(),
             );
@@ -722,7 +761,7 @@ mod tests {
             let (st0, m0, p0) =
                 merge_rescoring_every_pair(&mut l0, max, w as usize, eight, &pts, k, params, &toward);
             let mut l1 = labels;
-            let m = merge(&mut l1, max, w as usize, eight, &pts, k, params, &toward, &mut bufs);
+            let m = merge(&mut l1, max, w as usize, eight, &pts, k, params, 0, &toward, &mut bufs);
             assert_eq!((l1.as_slice(), m.n_merged, m.n_passes), (l0.as_slice(), m0, p0), "round {round}");
             for l in (1..=max as usize).filter(|&l| l0.contains(&(l as u32))) {
                 let (a, b) = (&bufs.stats[l], &st0[l]);
@@ -747,10 +786,10 @@ mod tests {
         let k = vec![0.0f32; 16];
         let toward = |_p: [f64; 3]| [0.0, 0.0, -1.0];
         let mut l = labels0.clone();
-        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::paper(), &toward, &mut Default::default());
+        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::paper(), 0, &toward, &mut Default::default());
         assert_eq!((m.n_merged, l.iter().all(|&v| v == 1)), (1, true));
         let mut l = labels0.clone();
-        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::default(), &toward, &mut Default::default());
+        let m = merge(&mut l, 2, 4, false, &pts, &k, &Params::default(), 0, &toward, &mut Default::default());
         assert_eq!((m.n_merged, l), (0, labels0));
     }
 

@@ -58,6 +58,29 @@ impl Plane {
         Some(Plane { normal, offset: -dot(normal, c), centroid: c, mean_sq: l0 })
     }
 
+    /// `Plane::fit(m, ..).map(|p| p.mean_sq)` (the same bits; the orientation does not change it) from the
+    /// eigenvalues alone: nalgebra computes them by the same operations with or without the eigenvectors, and a
+    /// finite covariance has finite unit eigenvectors, so only the eigenvalue tests of [`Plane::fit`] can fail.
+    /// A covariance with a non-finite entry goes through [`Plane::fit`].
+    pub(crate) fn fit_mean_sq(m: &Moments) -> Option<f64> {
+        if m.n < 3.0 {
+            return None;
+        }
+        let cov = m.covariance();
+        if !cov.iter().all(|v| v.is_finite()) {
+            return Plane::fit(m, |_| [0.0, 0.0, 1.0]).map(|p| p.mean_sq);
+        }
+        let ev = cov.symmetric_eigenvalues();
+        // As in `fit`: ascending, ties in index order.
+        let mut idx = [0usize, 1, 2];
+        idx.sort_by(|&i, &j| ev[i].total_cmp(&ev[j]));
+        let (l0, l1, l2) = (ev[idx[0]].max(0.0), ev[idx[1]].max(0.0), ev[idx[2]].max(0.0));
+        if l1.is_nan() || l1 <= 1e-9 * l2.max(1e-300) {
+            return None;
+        }
+        Some(l0)
+    }
+
     /// Mean squared distance of the points summarised by `m` to this plane.
     pub(crate) fn mean_sq_distance(&self, m: &Moments) -> f64 {
         if m.n <= 0.0 {
@@ -159,6 +182,44 @@ mod tests {
         assert!(Plane::fit(&two, |_| [0.0, 0.0, 1.0]).is_none());
         assert_eq!(two.combined(&m).n, 7.0);
     }
+    /// `fit_mean_sq` gives the bits of `Plane::fit(..).mean_sq` (or `None` with it) on random point sets: near
+    /// planes, near lines, repeated points, at several scales and offsets.
+    #[test]
+    fn fit_mean_sq_is_the_fit_s_mean_sq() {
+        use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(23);
+        let mut nones = 0;
+        for k in 0..20000 {
+            let scale = 10f64.powi(rng.random_range(-3..4));
+            let off =
+                [0, 1, 2].map(|_| rng.random_range(-1.0..1.0) * scale * 10f64.powi(rng.random_range(0..4)));
+            let noise = [0.0, 1e-9, 1e-4, 1e-2, 0.3, 1.0][k % 6];
+            let line = k % 7 == 0;
+            let n = rng.random_range(1..40);
+            let mut m = Moments::default();
+            for i in 0..n {
+                let same = k % 11 == 0 && i > 0;
+                let (u, v) = if same {
+                    (0.5, 0.5)
+                } else {
+                    (rng.random_range(-1.0..1.0), if line { 0.0 } else { rng.random_range(-1.0..1.0) })
+                };
+                let w = noise * rng.random_range(-1.0..1.0);
+                // f32 coordinates, as the growth stage stores them.
+                let p = [
+                    off[0] + scale * (u + 0.3 * v),
+                    off[1] + scale * (v - 0.2 * w),
+                    off[2] + scale * (w + 0.5 * u),
+                ];
+                m.add(p.map(|c| f64::from(c as f32)));
+            }
+            let want = Plane::fit(&m, |_| [0.3, -0.2, 1.0]).map(|p| p.mean_sq.to_bits());
+            nones += usize::from(want.is_none());
+            assert_eq!(Plane::fit_mean_sq(&m).map(f64::to_bits), want, "case {k}");
+        }
+        assert!(nones > 1000 && nones < 15000, "{nones} sets without a plane");
+    }
+
     #[test]
     fn smallest_axis_bound_never_exceeds_the_solver() {
         use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
