@@ -157,7 +157,8 @@ pub fn segment_into(
     //    labels agree), numbered in raster order of their first pixel, into the memory of the output labels.
     core_pixels(range, edges, guide, params, (row_dist, core));
     let mut comp = std::mem::take(labels).into_vec();
-    components::components_into(core.as_slice(), guide, (w, h), &mut comp, sizes, cbufs);
+    // The pixels keep provisional labels (component `cbufs.id[l]`) until step 2 maps them.
+    components::provisional_into(core.as_slice(), guide, (w, h), &mut comp, sizes, cbufs);
 
     // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
     let mut pieces = Pieces {
@@ -166,7 +167,7 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, (sizes, kept, row), guide, params.min_region_px);
+    pieces.fit(&scene, (sizes, &mut cbufs.id), (kept, row), guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -181,9 +182,12 @@ pub fn segment_into(
 
     // 5. Border pixels to the adjacent plane that fits them best.
     if params.refine_passes > 0 {
-        for l in &mut pieces.comp {
-            if *l != 0 {
-                *l = find(parent, *l);
+        // Each pixel to its merged group's root, through a table of the roots (none to rewrite if nothing merged).
+        root.clear();
+        root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
+        if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
+            for l in &mut pieces.comp {
+                *l = root[*l as usize];
             }
         }
         // A second round against planes refitted on the refined regions: a plane that the
@@ -264,7 +268,8 @@ struct Pieces {
 }
 
 impl Pieces {
-    /// Step 2: drops the components of `comp` (of sizes `sizes`) under `min_region_px` pixels, numbers the kept
+    /// Step 2: drops the components of `comp` (of sizes `sizes`; `comp` holds provisional labels, `ids[l]` the
+    /// component of label `l`, rewritten here into its new label) under `min_region_px` pixels, numbers the kept
     /// ones consecutively in their order (`kept[c − 1]`, the new label of component `c`, 0 if dropped), and fits
     /// a plane to each. The numbering keeps the order of the labels, so every later step (ties to the smaller
     /// label, pairs in sorted order, union-find roots) decides as it would on the component numbers; and the
@@ -272,7 +277,8 @@ impl Pieces {
     fn fit(
         &mut self,
         scene: &Scene<'_>,
-        (sizes, kept, row): (&[u32], &mut Vec<u32>, &mut Vec<[f64; 3]>),
+        (sizes, ids): (&[u32], &mut [u32]),
+        (kept, row): (&mut Vec<u32>, &mut Vec<[f64; 3]>),
         guide: Option<&[u32]>,
         min_region_px: u32,
     ) {
@@ -288,6 +294,10 @@ impl Pieces {
                 0
             }
         }));
+        // The new label of each provisional label (label 0 stays 0).
+        for c in ids.iter_mut().skip(1) {
+            *c = kept[*c as usize - 1];
+        }
         // Room for every region a frame of this size can keep, so later frames reuse the memory.
         let room = (w * h) / (min_region_px.max(1) as usize) + 1;
         let n = n_kept as usize;
@@ -298,7 +308,7 @@ impl Pieces {
         self.moments.clear();
         self.moments.reserve(room);
         self.moments.resize(n, Moments::default());
-        let (comp, guides, moments) = (&mut self.comp, &mut self.guide, &mut self.moments);
+        let (comp, guides, moments, ids) = (&mut self.comp, &mut self.guide, &mut self.moments, &*ids);
         // Compiled for the best instruction set of this CPU, so each row's points are computed several at a
         // time (the same bits on every one).
         isa::dispatch(
@@ -318,7 +328,7 @@ impl Pieces {
                         if *c == 0 {
                             continue;
                         }
-                        *c = kept[*c as usize - 1];
+                        *c = ids[*c as usize];
                         if *c == 0 {
                             continue;
                         }
