@@ -193,11 +193,13 @@ pub fn segment_into(
         // A second round against planes refitted on the refined regions: a plane that the
         // misplaced pixels had tilted now lets the rest of them go. (The reported planes stay
         // those of the core pixels.)
-        if refine::refine(&scene, &mut pieces.comp, &pieces.planes, limit, params.refine_passes, rbufs) > 0 {
+        let (passes, first) = (params.refine_passes, (&pieces.planes[..], refine::Start::Scan));
+        if refine::refine(&scene, &mut pieces.comp, first, limit, passes, rbufs) > 0 {
             refitted.clear();
             refitted.extend_from_slice(&pieces.planes);
             refine::refit(&scene, &pieces.comp, refitted, (rbufs, row));
-            refine::refine(&scene, &mut pieces.comp, refitted, limit, params.refine_passes, rbufs);
+            let second = (&refitted[..], refine::Start::Update);
+            refine::refine(&scene, &mut pieces.comp, second, limit, passes, rbufs);
         }
     }
 
