@@ -191,19 +191,35 @@ fn borders_into(
             }
         }
     };
-    for y in 0..h {
-        let row = y * w;
-        for x in 1..w {
-            if comp[row + x - 1] != comp[row + x] {
-                add(row + x - 1, row + x);
-            }
-        }
-        if y + 1 < h {
-            for x in 0..w {
-                if comp[row + x] != comp[row + w + x] {
-                    add(row + x, row + w + x);
+    // Pixel pairs (row + x + d₀, row + x + d₁), x in `xs`, in order; chunks of pairs that all match are skipped
+    // by one test without branches.
+    let mut scan = |row: usize, xs: std::ops::Range<usize>, (d0, d1): (usize, usize)| {
+        const CHUNK: usize = 16;
+        let mut x = xs.start;
+        while x + CHUNK <= xs.end {
+            let (a, b) =
+                (&comp[row + x + d0..row + x + d0 + CHUNK], &comp[row + x + d1..row + x + d1 + CHUNK]);
+            if a.iter().zip(b).fold(0u32, |acc, (&p, &q)| acc | (p ^ q)) != 0 {
+                for k in x..x + CHUNK {
+                    if comp[row + k + d0] != comp[row + k + d1] {
+                        add(row + k + d0, row + k + d1);
+                    }
                 }
             }
+            x += CHUNK;
+        }
+        for k in x..xs.end {
+            if comp[row + k + d0] != comp[row + k + d1] {
+                add(row + k + d0, row + k + d1);
+            }
+        }
+    };
+    for y in 0..h {
+        let row = y * w;
+        // Each pixel with its right neighbour, then with the one below.
+        scan(row, 0..w.saturating_sub(1), (0, 1));
+        if y + 1 < h {
+            scan(row, 0..w, (0, w));
         }
     }
     out.entries.sort_unstable_by_key(|e| e.0);
