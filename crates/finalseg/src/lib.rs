@@ -320,6 +320,7 @@ impl Pieces {
                 // the same order, but in registers).
                 let mut cur = 0u32;
                 let mut acc = Moments::default();
+                let mut run = 0u32;
                 for y in 0..h {
                     let labels = &mut comp[y * w..(y + 1) * w];
                     if labels.iter().all(|&c| c == 0) {
@@ -334,8 +335,12 @@ impl Pieces {
                         if *c == 0 {
                             continue;
                         }
-                        if let Some(g) = guide {
-                            guides[*c as usize - 1] = g[y * w + x];
+                        // All pixels of a component share its guide label: read it where a run of one starts.
+                        if *c != run {
+                            run = *c;
+                            if let Some(g) = guide {
+                                guides[*c as usize - 1] = g[y * w + x];
+                            }
                         }
                         if vals[x].is_finite() {
                             if *c != cur {
