@@ -148,24 +148,6 @@ pub(crate) fn provisional_into(
     }
 }
 
-/// Adds the number of pixels of each label `l ≥ 1` to `sizes[l − 1]` (run by run, so that a
-/// long run costs no chain of increments through memory).
-pub(crate) fn count_labels(labels: &[u32], sizes: &mut [u32]) {
-    let (mut cur, mut n) = (0u32, 0u32);
-    for &l in labels {
-        if l != cur {
-            if cur != 0 {
-                sizes[cur as usize - 1] += n;
-            }
-            (cur, n) = (l, 0);
-        }
-        n += 1;
-    }
-    if cur != 0 {
-        sizes[cur as usize - 1] += n;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

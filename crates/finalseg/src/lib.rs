@@ -12,7 +12,6 @@ mod refine;
 
 pub use params::{Mode, Params};
 
-use components::count_labels;
 use plane::{Plane, fit_plane};
 use planefit::Moments;
 use rangeimage::union_find::find;
@@ -384,23 +383,36 @@ impl Pieces {
         order.clear();
         order.reserve(n);
         let mut comp = std::mem::take(&mut self.comp);
+        // The final sizes, counted into `parent` (no longer needed; one entry per final label, at most n + 1).
+        let sizes = parent;
+        sizes.fill(0);
+        // Runs of one label: the label looked up once per run, and counted once per run.
+        let (mut from, mut to, mut run) = (0u32, 0u32, 0u32);
         for l in &mut comp {
-            if *l == 0 {
-                continue;
+            if *l != from {
+                if to != 0 {
+                    sizes[to as usize - 1] += run;
+                }
+                (from, run) = (*l, 0);
+                to = if *l == 0 {
+                    0
+                } else {
+                    let c = root[*l as usize] as usize;
+                    if map[c] == 0 {
+                        order.push(c as u32);
+                        map[c] = order.len() as u32;
+                    }
+                    map[c]
+                };
             }
-            let c = root[*l as usize] as usize;
-            if map[c] == 0 {
-                order.push(c as u32);
-                map[c] = order.len() as u32;
-            }
-            *l = map[c];
+            *l = to;
+            run += 1;
         }
-        // The final sizes, counted into `root` (no longer needed).
-        root.clear();
-        root.resize(order.len(), 0);
-        count_labels(&comp, root);
+        if to != 0 {
+            sizes[to as usize - 1] += run;
+        }
         regions.clear();
-        regions.extend(order.iter().zip(root.iter()).enumerate().map(|(k, (&c, &size_px))| {
+        regions.extend(order.iter().zip(sizes.iter()).enumerate().map(|(k, (&c, &size_px))| {
             let plane = planes[c as usize - 1];
             Region {
                 label: k as u32 + 1,
