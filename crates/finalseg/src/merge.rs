@@ -138,24 +138,30 @@ pub(crate) struct Buffers {
 }
 
 /// Into `near`, the pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR
-/// per row (into `hor`), then a vertical 3-high OR of those rows.
+/// per row (into `hor`), then a vertical 3-high OR of those rows, each written in one pass of slices.
 fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &mut Vec<bool>) {
     let ed = edges.as_slice();
     hor.clear();
     hor.extend_from_slice(ed);
-    for (hrow, erow) in hor.chunks_exact_mut(w.max(1)).zip(ed.chunks_exact(w.max(1))) {
-        for x in 1..w {
-            hrow[x] |= erow[x - 1];
-            hrow[x - 1] |= erow[x];
-        }
-    }
     near.clear();
     near.resize(w * h, false);
-    for (y, nrow) in near.chunks_exact_mut(w.max(1)).enumerate() {
-        for yy in y.saturating_sub(1)..(y + 2).min(h) {
-            for (n, &v) in nrow.iter_mut().zip(&hor[yy * w..(yy + 1) * w]) {
-                *n |= v;
+    if w == 0 {
+        return;
+    }
+    for (hrow, erow) in hor.chunks_exact_mut(w).zip(ed.chunks_exact(w)) {
+        if w > 1 {
+            for ((o, &l), &r) in hrow[1..w - 1].iter_mut().zip(&erow[..w - 2]).zip(&erow[2..]) {
+                *o |= l | r;
             }
+            hrow[0] |= erow[1];
+            hrow[w - 1] |= erow[w - 2];
+        }
+    }
+    for (y, nrow) in near.chunks_exact_mut(w).enumerate() {
+        let row = |yy: usize| &hor[yy * w..(yy + 1) * w];
+        let (up, mid, dn) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
+        for (((o, &u), &m), &d) in nrow.iter_mut().zip(up).zip(mid).zip(dn) {
+            *o = u | m | d;
         }
     }
 }
@@ -371,6 +377,27 @@ mod tests {
         }
         format!("{:?}", pairs.iter().map(|(k, b)| (*k, b.n, b.near, b.gap.to_bits())).collect::<Vec<_>>())
             .into_bytes()
+    }
+
+    /// The near-edge mask is the 3 × 3 dilation of the edges, pixel by pixel.
+    #[test]
+    fn near_edges_is_the_3x3_dilation() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(37);
+        let (mut hor, mut near) = (Vec::new(), Vec::new());
+        for case in 0..200 {
+            let (w, h) = (rng.random_range(1..50usize), rng.random_range(1..30usize));
+            let p = [0.01, 0.05, 0.2][case % 3];
+            let edges = rangeimage::Grid::from_fn(w as u32, h as u32, |_, _| rng.random_bool(p));
+            near_edges(&edges, w, h, &mut hor, &mut near);
+            for y in 0..h {
+                for x in 0..w {
+                    let want = (y.saturating_sub(1)..(y + 2).min(h)).any(|yy| {
+                        (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| edges[(xx as u32, yy as u32)])
+                    });
+                    assert_eq!(near[y * w + x], want, "case {case} ({w}×{h}) at ({x}, {y})");
+                }
+            }
+        }
     }
 
     /// The pair table gives the map's pairs, counts and gap sums (bit for bit) on random label images of
