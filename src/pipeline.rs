@@ -188,6 +188,59 @@ impl Segmenter {
     }
 }
 
+/// One [`Segmenter`] per worker thread of a rayon pool, kept for the whole run: every frame a thread segments
+/// reuses the buffers of that thread's previous frame, however rayon splits the work (`map_init` makes a fresh
+/// `Segmenter` per job split, each paying the first frame's allocations and page faults again).
+#[derive(Debug)]
+pub struct Segmenters {
+    config: Config,
+    slots: Vec<std::sync::Mutex<Segmenter>>,
+}
+
+impl Segmenters {
+    /// `threads` slots (at least one) running `config`; each allocates its buffers on its first frame.
+    ///
+    /// # Panics
+    /// If `config` is invalid ([`Config::validate`]; [`Config::load`] returns only valid ones).
+    pub fn new(config: &Config, threads: usize) -> Self {
+        check(config, "Segmenters::new");
+        let slots =
+            (0..threads.max(1)).map(|_| std::sync::Mutex::new(Segmenter::new(config.clone()))).collect();
+        Self { config: config.clone(), slots }
+    }
+
+    /// Slots for the threads of the current rayon pool ([`rayon::current_num_threads`]).
+    ///
+    /// # Panics
+    /// If `config` is invalid ([`Config::validate`]).
+    pub fn for_current_pool(config: &Config) -> Self {
+        Self::new(config, rayon::current_num_threads())
+    }
+
+    /// Runs `f` with the calling thread's `Segmenter` (slot [`rayon::current_thread_index`] modulo the slots; slot 0
+    /// outside a pool). If that slot is busy (`f` itself ran rayon work that came back to this thread, or a thread
+    /// of another pool shares the slot), `f` gets a fresh `Segmenter` instead; after a panic in `f` the slot starts
+    /// afresh. The results are the same either way.
+    pub fn with<R>(&self, f: impl FnOnce(&mut Segmenter) -> R) -> R {
+        let slot = &self.slots[rayon::current_thread_index().unwrap_or(0) % self.slots.len()];
+        match slot.try_lock() {
+            Ok(mut seg) => f(&mut seg),
+            Err(std::sync::TryLockError::Poisoned(p)) => {
+                let mut seg = p.into_inner();
+                *seg = Segmenter::new(self.config.clone());
+                slot.clear_poison();
+                f(&mut seg)
+            }
+            Err(std::sync::TryLockError::WouldBlock) => f(&mut Segmenter::new(self.config.clone())),
+        }
+    }
+
+    /// The configuration every slot runs.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+}
+
 /// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
 ///
 /// # Panics

@@ -22,6 +22,28 @@ fn bit_identical_at_one_and_two_threads() {
 }
 
 #[test]
+fn per_thread_segmenters_give_the_results_of_segment() {
+    use rayon::prelude::*;
+    let config = Config::default();
+    let ranges: Vec<_> = [1, 3, 1, 4].iter().map(|&i| crate::range_of(&crate::small_scene(i))).collect();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let segs = rangeseg::pipeline::Segmenters::new(&config, 2);
+    let labels: Vec<_> = pool.install(|| {
+        ranges
+            .par_iter()
+            .map(|r| segs.with(|s| s.segment(r, &rangeimage::Camera::ABW0).fin.labels.clone()))
+            .collect()
+    });
+    for (range, got) in ranges.iter().zip(&labels) {
+        assert_eq!(got, &rangeseg::segment(range, &rangeimage::Camera::ABW0, &config).fin.labels);
+    }
+    // A nested call finds its thread's slot busy and runs on a fresh segmenter, with the same result.
+    let nested =
+        segs.with(|_| segs.with(|s| s.segment(&ranges[0], &rangeimage::Camera::ABW0).fin.labels.clone()));
+    assert_eq!(nested, labels[0]);
+}
+
+#[test]
 fn labels_are_zero_on_no_data_and_energy_does_not_increase() {
     let scene = crate::small_scene(5);
     let range = crate::range_of(&scene);

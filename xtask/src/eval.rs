@@ -69,18 +69,16 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} [{elapsed_precise} < {eta_precise}]")
             .expect("template"),
     );
+    // One segmenter per worker thread for the whole run: its images reuse the buffers of its previous image.
+    let segs = rangeseg::pipeline::Segmenters::for_current_pool(&config);
     let rows: Vec<ImageRow> = set
         .images
         .par_iter()
-        // One segmenter per rayon job: its images reuse the buffers of its previous image.
-        .map_init(
-            || rangeseg::pipeline::Segmenter::new(config.clone()),
-            |seg, img| {
-                let r = evaluate_one(img, seg, &out_dir, &fig_dir);
-                bar.inc(1);
-                r
-            },
-        )
+        .map(|img| {
+            let r = segs.with(|seg| evaluate_one(img, seg, &out_dir, &fig_dir));
+            bar.inc(1);
+            r
+        })
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
 

@@ -66,11 +66,11 @@ pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<
         .map(|k| {
             let mut cfg = config.clone();
             cfg.seed = config.seed.wrapping_add(k);
+            let segs = rangeseg::pipeline::Segmenters::for_current_pool(&cfg);
             let scores: Vec<_> = images
                 .par_iter()
-                .map_init(
-                    || rangeseg::pipeline::Segmenter::new(cfg.clone()),
-                    |seg, img| {
+                .map(|img| {
+                    segs.with(|seg| {
                         let out = seg.segment(&img.frame.range, &img.frame.camera);
                         let hoover = |l, r| rangeseg::evaluate::hoover(&img.gt, l, r, &img.angles);
                         (
@@ -78,8 +78,8 @@ pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<
                             hoover(&out.regions.labels, &out.regions.regions),
                             rangeseg::evaluate::jin(&img.gt, &out.fin.labels),
                         )
-                    },
-                )
+                    })
+                })
                 .collect();
             let mut t = Totals { seed: cfg.seed, ..Totals::default() };
             for (fin, rg, jin) in &scores {

@@ -18,12 +18,31 @@ pub(crate) fn components(core: &[bool], guide: Option<&[u32]>, w: usize, h: usiz
 pub(crate) struct Buffers {
     /// Parent of each provisional label.
     parent: Vec<u32>,
-    /// Final component of each provisional label.
-    id: Vec<u32>,
+    /// Final component of each provisional label (0 for label 0).
+    pub(crate) id: Vec<u32>,
+    /// Pixels of each provisional label.
+    count: Vec<u32>,
 }
 
 /// [`components`] into `lab` and `sizes`, whose memory is reused like that of `bufs`.
+#[cfg(test)]
 pub(crate) fn components_into(
+    core: &[bool],
+    guide: Option<&[u32]>,
+    (w, h): (usize, usize),
+    lab: &mut Vec<u32>,
+    sizes: &mut Vec<u32>,
+    bufs: &mut Buffers,
+) {
+    provisional_into(core, guide, (w, h), lab, sizes, bufs);
+    for l in lab.iter_mut() {
+        *l = bufs.id[*l as usize];
+    }
+}
+
+/// [`components_into`] but with the provisional labels left in `lab`: the component of provisional label `l` is
+/// `bufs.id[l]` (0 for 0); `sizes` are the components' sizes. The caller maps the labels in its own pass.
+pub(crate) fn provisional_into(
     core: &[bool],
     guide: Option<&[u32]>,
     (w, h): (usize, usize),
@@ -36,10 +55,13 @@ pub(crate) fn components_into(
     lab.resize(n_px, 0);
     // Provisional labels from 1; parent[l] ≤ l, so roots are the smallest label of a set. There is at most one
     // per pixel (a run of one pixel each): the room is reserved once, and touched only as far as used.
-    let Buffers { parent, id } = bufs;
+    let Buffers { parent, id, count } = bufs;
     parent.clear();
     parent.reserve(n_px + 1);
     parent.push(0);
+    count.clear();
+    count.reserve(n_px + 1);
+    count.push(0);
     // Runs of core pixels with one guide label; a run connects to the labels right above it.
     for y in 0..h {
         let row = y * w;
@@ -93,9 +115,11 @@ pub(crate) fn components_into(
             }
             if l == 0 {
                 parent.push(parent.len() as u32);
+                count.push(0);
                 l = parent.len() as u32 - 1;
             }
             lab[row + x..row + e].fill(l);
+            count[l as usize] += (e - x) as u32;
             x = e;
         }
     }
@@ -116,30 +140,11 @@ pub(crate) fn components_into(
             id[p]
         };
     }
-    for l in lab.iter_mut() {
-        *l = id[*l as usize];
-    }
     sizes.clear();
     sizes.reserve(n_px);
     sizes.resize(n as usize, 0);
-    count_labels(lab, sizes);
-}
-
-/// Adds the number of pixels of each label `l ≥ 1` to `sizes[l − 1]` (run by run, so that a
-/// long run costs no chain of increments through memory).
-pub(crate) fn count_labels(labels: &[u32], sizes: &mut [u32]) {
-    let (mut cur, mut n) = (0u32, 0u32);
-    for &l in labels {
-        if l != cur {
-            if cur != 0 {
-                sizes[cur as usize - 1] += n;
-            }
-            (cur, n) = (l, 0);
-        }
-        n += 1;
-    }
-    if cur != 0 {
-        sizes[cur as usize - 1] += n;
+    for (&c, &k) in id.iter().zip(count.iter()).skip(1) {
+        sizes[c as usize - 1] += k;
     }
 }
 

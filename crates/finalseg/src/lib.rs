@@ -12,7 +12,6 @@ mod refine;
 
 pub use params::{Mode, Params};
 
-use components::count_labels;
 use plane::{Plane, fit_plane};
 use planefit::Moments;
 use rangeimage::union_find::find;
@@ -157,7 +156,8 @@ pub fn segment_into(
     //    labels agree), numbered in raster order of their first pixel, into the memory of the output labels.
     core_pixels(range, edges, guide, params, (row_dist, core));
     let mut comp = std::mem::take(labels).into_vec();
-    components::components_into(core.as_slice(), guide, (w, h), &mut comp, sizes, cbufs);
+    // The pixels keep provisional labels (component `cbufs.id[l]`) until step 2 maps them.
+    components::provisional_into(core.as_slice(), guide, (w, h), &mut comp, sizes, cbufs);
 
     // 2. Drop small components; fit a plane to every kept one (moments summed in raster order).
     let mut pieces = Pieces {
@@ -166,7 +166,7 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, (sizes, kept, row), guide, params.min_region_px);
+    pieces.fit(&scene, (sizes, &mut cbufs.id), (kept, row), guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -181,19 +181,24 @@ pub fn segment_into(
 
     // 5. Border pixels to the adjacent plane that fits them best.
     if params.refine_passes > 0 {
-        for l in &mut pieces.comp {
-            if *l != 0 {
-                *l = find(parent, *l);
+        // Each pixel to its merged group's root, through a table of the roots (none to rewrite if nothing merged).
+        root.clear();
+        root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
+        if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
+            for l in &mut pieces.comp {
+                *l = root[*l as usize];
             }
         }
         // A second round against planes refitted on the refined regions: a plane that the
         // misplaced pixels had tilted now lets the rest of them go. (The reported planes stay
         // those of the core pixels.)
-        if refine::refine(&scene, &mut pieces.comp, &pieces.planes, limit, params.refine_passes, rbufs) > 0 {
+        let (passes, first) = (params.refine_passes, (&pieces.planes[..], refine::Start::Scan));
+        if refine::refine(&scene, &mut pieces.comp, first, limit, passes, rbufs) > 0 {
             refitted.clear();
             refitted.extend_from_slice(&pieces.planes);
             refine::refit(&scene, &pieces.comp, refitted, (rbufs, row));
-            refine::refine(&scene, &mut pieces.comp, refitted, limit, params.refine_passes, rbufs);
+            let second = (&refitted[..], refine::Start::Update);
+            refine::refine(&scene, &mut pieces.comp, second, limit, passes, rbufs);
         }
     }
 
@@ -264,7 +269,8 @@ struct Pieces {
 }
 
 impl Pieces {
-    /// Step 2: drops the components of `comp` (of sizes `sizes`) under `min_region_px` pixels, numbers the kept
+    /// Step 2: drops the components of `comp` (of sizes `sizes`; `comp` holds provisional labels, `ids[l]` the
+    /// component of label `l`, rewritten here into its new label) under `min_region_px` pixels, numbers the kept
     /// ones consecutively in their order (`kept[c − 1]`, the new label of component `c`, 0 if dropped), and fits
     /// a plane to each. The numbering keeps the order of the labels, so every later step (ties to the smaller
     /// label, pairs in sorted order, union-find roots) decides as it would on the component numbers; and the
@@ -272,7 +278,8 @@ impl Pieces {
     fn fit(
         &mut self,
         scene: &Scene<'_>,
-        (sizes, kept, row): (&[u32], &mut Vec<u32>, &mut Vec<[f64; 3]>),
+        (sizes, ids): (&[u32], &mut [u32]),
+        (kept, row): (&mut Vec<u32>, &mut Vec<[f64; 3]>),
         guide: Option<&[u32]>,
         min_region_px: u32,
     ) {
@@ -288,6 +295,10 @@ impl Pieces {
                 0
             }
         }));
+        // The new label of each provisional label (label 0 stays 0).
+        for c in ids.iter_mut().skip(1) {
+            *c = kept[*c as usize - 1];
+        }
         // Room for every region a frame of this size can keep, so later frames reuse the memory.
         let room = (w * h) / (min_region_px.max(1) as usize) + 1;
         let n = n_kept as usize;
@@ -298,7 +309,7 @@ impl Pieces {
         self.moments.clear();
         self.moments.reserve(room);
         self.moments.resize(n, Moments::default());
-        let (comp, guides, moments) = (&mut self.comp, &mut self.guide, &mut self.moments);
+        let (comp, guides, moments, ids) = (&mut self.comp, &mut self.guide, &mut self.moments, &*ids);
         // Compiled for the best instruction set of this CPU, so each row's points are computed several at a
         // time (the same bits on every one).
         isa::dispatch(
@@ -308,6 +319,7 @@ impl Pieces {
                 // the same order, but in registers).
                 let mut cur = 0u32;
                 let mut acc = Moments::default();
+                let mut run = 0u32;
                 for y in 0..h {
                     let labels = &mut comp[y * w..(y + 1) * w];
                     if labels.iter().all(|&c| c == 0) {
@@ -318,12 +330,16 @@ impl Pieces {
                         if *c == 0 {
                             continue;
                         }
-                        *c = kept[*c as usize - 1];
+                        *c = ids[*c as usize];
                         if *c == 0 {
                             continue;
                         }
-                        if let Some(g) = guide {
-                            guides[*c as usize - 1] = g[y * w + x];
+                        // All pixels of a component share its guide label: read it where a run of one starts.
+                        if *c != run {
+                            run = *c;
+                            if let Some(g) = guide {
+                                guides[*c as usize - 1] = g[y * w + x];
+                            }
                         }
                         if vals[x].is_finite() {
                             if *c != cur {
@@ -367,23 +383,36 @@ impl Pieces {
         order.clear();
         order.reserve(n);
         let mut comp = std::mem::take(&mut self.comp);
+        // The final sizes, counted into `parent` (no longer needed; one entry per final label, at most n + 1).
+        let sizes = parent;
+        sizes.fill(0);
+        // Runs of one label: the label looked up once per run, and counted once per run.
+        let (mut from, mut to, mut run) = (0u32, 0u32, 0u32);
         for l in &mut comp {
-            if *l == 0 {
-                continue;
+            if *l != from {
+                if to != 0 {
+                    sizes[to as usize - 1] += run;
+                }
+                (from, run) = (*l, 0);
+                to = if *l == 0 {
+                    0
+                } else {
+                    let c = root[*l as usize] as usize;
+                    if map[c] == 0 {
+                        order.push(c as u32);
+                        map[c] = order.len() as u32;
+                    }
+                    map[c]
+                };
             }
-            let c = root[*l as usize] as usize;
-            if map[c] == 0 {
-                order.push(c as u32);
-                map[c] = order.len() as u32;
-            }
-            *l = map[c];
+            *l = to;
+            run += 1;
         }
-        // The final sizes, counted into `root` (no longer needed).
-        root.clear();
-        root.resize(order.len(), 0);
-        count_labels(&comp, root);
+        if to != 0 {
+            sizes[to as usize - 1] += run;
+        }
         regions.clear();
-        regions.extend(order.iter().zip(root.iter()).enumerate().map(|(k, (&c, &size_px))| {
+        regions.extend(order.iter().zip(sizes.iter()).enumerate().map(|(k, (&c, &size_px))| {
             let plane = planes[c as usize - 1];
             Region {
                 label: k as u32 + 1,

@@ -6,7 +6,6 @@ use crate::{Params, Pieces, Scene};
 use planefit::Moments;
 use rangeimage::EdgeMap;
 use rangeimage::union_find::find;
-use std::collections::BTreeMap;
 
 /// The border between two adjacent components, over 4-adjacencies.
 #[derive(Debug, Clone, Copy, Default)]
@@ -19,8 +18,52 @@ struct Border {
     gap: f64,
 }
 
-/// Per adjacent pair of components (smaller label, larger label): their border.
-type Borders = BTreeMap<(u32, u32), Border>;
+/// Per adjacent pair of components (smaller label, larger label): their border; the pairs in sorted order once
+/// [`borders_into`] has finished. Each pair's sums take its border pixels in raster order, as a map would.
+#[derive(Debug, Default)]
+struct Borders {
+    /// The pairs and their borders.
+    entries: Vec<((u32, u32), Border)>,
+    /// While collecting: per smaller label, 1 + the index in `entries` of its latest pair (0 = none).
+    head: Vec<u32>,
+    /// While collecting: per entry, 1 + the index of the previous pair with the same smaller label (0 = none).
+    next: Vec<u32>,
+}
+
+impl Borders {
+    /// Empties the table for labels `1..=n`; `room` pairs are reserved (untouched memory) so that later frames
+    /// reuse it.
+    fn reset(&mut self, n: usize, room: usize) {
+        self.head.clear();
+        self.head.reserve(room);
+        self.head.resize(n + 1, 0);
+        self.entries.clear();
+        self.entries.reserve(room * 3);
+        self.next.clear();
+        self.next.reserve(room * 3);
+    }
+
+    /// The index in `entries` of pair `key` (smaller label first), appended if new.
+    #[inline]
+    fn index(&mut self, key: (u32, u32)) -> usize {
+        let mut k = self.head[key.0 as usize];
+        while k != 0 {
+            if self.entries[k as usize - 1].0 == key {
+                return k as usize - 1;
+            }
+            k = self.next[k as usize - 1];
+        }
+        self.entries.push((key, Border::default()));
+        self.next.push(self.head[key.0 as usize]);
+        self.head[key.0 as usize] = self.entries.len() as u32;
+        self.entries.len() - 1
+    }
+
+    /// The number of adjacent pairs.
+    fn len(&self) -> usize {
+        self.entries.len()
+    }
+}
 
 /// How a candidate pair may merge.
 #[derive(Debug, Clone, Copy)]
@@ -65,11 +108,13 @@ pub(crate) fn merge_unsupported(
     params: &Params,
     bufs: &mut Buffers,
 ) {
-    let Buffers { hor, near, candidates } = bufs;
+    let Buffers { hor, near, borders, candidates } = bufs;
     near_edges(edges, scene.w, scene.h, hor, near);
     let bends = params.bend_max_angle_deg > 0.0;
-    let borders = borders(scene, &pieces.comp, near, bends.then_some(&pieces.planes[..]));
-    candidates_into(&borders, (&pieces.guide, &pieces.planes), params, candidates);
+    let room = (scene.w * scene.h) / (params.min_region_px.max(1) as usize) + 1;
+    borders.reset(pieces.planes.len(), room);
+    borders_into(scene, &pieces.comp, near, (&pieces.planes, bends), borders);
+    candidates_into(borders, (&pieces.guide, &pieces.planes), params, candidates);
     let test = PlaneTest {
         cos_max: params.merge_max_angle_deg.to_radians().cos(),
         r2: params.merge_max_residual * params.merge_max_residual,
@@ -87,68 +132,103 @@ pub(crate) struct Buffers {
     /// Per pixel: the horizontal pass of [`near_edges`], and its result.
     hor: Vec<bool>,
     near: Vec<bool>,
+    /// The borders between adjacent components.
+    borders: Borders,
     candidates: Candidates,
 }
 
 /// Into `near`, the pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR
-/// per row (into `hor`), then a vertical 3-high OR of those rows.
+/// per row (into `hor`), then a vertical 3-high OR of those rows, each written in one pass of slices.
 fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &mut Vec<bool>) {
     let ed = edges.as_slice();
     hor.clear();
     hor.extend_from_slice(ed);
-    for (hrow, erow) in hor.chunks_exact_mut(w.max(1)).zip(ed.chunks_exact(w.max(1))) {
-        for x in 1..w {
-            hrow[x] |= erow[x - 1];
-            hrow[x - 1] |= erow[x];
-        }
-    }
     near.clear();
     near.resize(w * h, false);
-    for (y, nrow) in near.chunks_exact_mut(w.max(1)).enumerate() {
-        for yy in y.saturating_sub(1)..(y + 2).min(h) {
-            for (n, &v) in nrow.iter_mut().zip(&hor[yy * w..(yy + 1) * w]) {
-                *n |= v;
+    if w == 0 {
+        return;
+    }
+    for (hrow, erow) in hor.chunks_exact_mut(w).zip(ed.chunks_exact(w)) {
+        if w > 1 {
+            for ((o, &l), &r) in hrow[1..w - 1].iter_mut().zip(&erow[..w - 2]).zip(&erow[2..]) {
+                *o |= l | r;
             }
+            hrow[0] |= erow[1];
+            hrow[w - 1] |= erow[w - 2];
+        }
+    }
+    for (y, nrow) in near.chunks_exact_mut(w).enumerate() {
+        let row = |yy: usize| &hor[yy * w..(yy + 1) * w];
+        let (up, mid, dn) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
+        for (((o, &u), &m), &d) in nrow.iter_mut().zip(up).zip(mid).zip(dn) {
+            *o = u | m | d;
         }
     }
 }
 
-/// The borders between adjacent components of `comp`, with their support by `near` and, given the
-/// components' `planes` (`planes[l − 1]` for label `l`), their gaps.
-fn borders(scene: &Scene<'_>, comp: &[u32], near: &[bool], planes: Option<&[Plane]>) -> Borders {
+/// Into `out` (reset for the labels of `comp`), the borders between adjacent components of `comp`, with their
+/// support by `near` and, with `gaps`, their gaps to the components' `planes` (`planes[l − 1]` for label `l`);
+/// the pairs sorted at the end.
+fn borders_into(
+    scene: &Scene<'_>,
+    comp: &[u32],
+    near: &[bool],
+    (planes, gaps): (&[Plane], bool),
+    out: &mut Borders,
+) {
     let (w, h) = (scene.w, scene.h);
-    let mut pairs = Borders::new();
     // Distance of pixel i's 3D point to the plane of label l.
-    let gap = |i: usize, l: u32, planes: &[Plane]| {
-        scene.point(i % w, i / w).map_or(0.0, |p| planes[l as usize - 1].residual(p))
-    };
+    let gap =
+        |i: usize, l: u32| scene.point(i % w, i / w).map_or(0.0, |p| planes[l as usize - 1].residual(p));
+    // The pair of the previous border pixel and its entry: a border is mostly met pair after pair.
+    let mut last = ((0u32, 0u32), 0usize);
     let mut add = |i: usize, j: usize| {
         let (a, b) = (comp[i], comp[j]);
         if a != 0 && b != 0 && a != b {
-            let entry = pairs.entry((a.min(b), a.max(b))).or_default();
+            let key = (a.min(b), a.max(b));
+            if key != last.0 {
+                last = (key, out.index(key));
+            }
+            let entry = &mut out.entries[last.1].1;
             entry.n += 2;
             entry.near += u32::from(near[i]) + u32::from(near[j]);
-            if let Some(planes) = planes {
-                entry.gap += gap(i, b, planes) + gap(j, a, planes);
+            if gaps {
+                entry.gap += gap(i, b) + gap(j, a);
+            }
+        }
+    };
+    // Pixel pairs (row + x + d₀, row + x + d₁), x in `xs`, in order; chunks of pairs that all match are skipped
+    // by one test without branches.
+    let mut scan = |row: usize, xs: std::ops::Range<usize>, (d0, d1): (usize, usize)| {
+        const CHUNK: usize = 16;
+        let mut x = xs.start;
+        while x + CHUNK <= xs.end {
+            let (a, b) =
+                (&comp[row + x + d0..row + x + d0 + CHUNK], &comp[row + x + d1..row + x + d1 + CHUNK]);
+            if a.iter().zip(b).fold(0u32, |acc, (&p, &q)| acc | (p ^ q)) != 0 {
+                for k in x..x + CHUNK {
+                    if comp[row + k + d0] != comp[row + k + d1] {
+                        add(row + k + d0, row + k + d1);
+                    }
+                }
+            }
+            x += CHUNK;
+        }
+        for k in x..xs.end {
+            if comp[row + k + d0] != comp[row + k + d1] {
+                add(row + k + d0, row + k + d1);
             }
         }
     };
     for y in 0..h {
         let row = y * w;
-        for x in 1..w {
-            if comp[row + x - 1] != comp[row + x] {
-                add(row + x - 1, row + x);
-            }
-        }
+        // Each pixel with its right neighbour, then with the one below.
+        scan(row, 0..w.saturating_sub(1), (0, 1));
         if y + 1 < h {
-            for x in 0..w {
-                if comp[row + x] != comp[row + w + x] {
-                    add(row + x, row + w + x);
-                }
-            }
+            scan(row, 0..w, (0, w));
         }
     }
-    pairs
+    out.entries.sort_unstable_by_key(|e| e.0);
 }
 
 /// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
@@ -165,7 +245,7 @@ fn candidates_into(
     let Candidates { pairs, kinds } = out;
     pairs.clear();
     kinds.clear();
-    for (&(a, b), border) in borders {
+    for &((a, b), ref border) in &borders.entries {
         let n = f64::from(border.n);
         let weak = f64::from(border.near) < params.min_border_support * n;
         let same_region = params.merge_within_region && {
@@ -257,5 +337,108 @@ impl PlaneTest {
         let scatter = pa.rms.max(pb.rms);
         let limit = self.fit2 * scatter * scatter;
         within_angle || (mean_sq_residual(ma, &pj) <= limit && mean_sq_residual(mb, &pj) <= limit)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use std::collections::BTreeMap;
+
+    /// The borders as a sorted map, one pixel pair at a time (the code before the table).
+    fn borders_by_map(
+        scene: &Scene<'_>,
+        comp: &[u32],
+        near: &[bool],
+        planes: &[Plane],
+        gaps: bool,
+    ) -> Vec<u8> {
+        let (w, h) = (scene.w, scene.h);
+        let mut pairs: BTreeMap<(u32, u32), Border> = BTreeMap::new();
+        let gap =
+            |i: usize, l: u32| scene.point(i % w, i / w).map_or(0.0, |p| planes[l as usize - 1].residual(p));
+        // Per row: its horizontal pairs, then its vertical pairs with the row below.
+        let events = (0..h).flat_map(|y| {
+            let hor = (1..w).map(move |x| (y * w + x - 1, y * w + x));
+            let ver = (0..w).filter(move |_| y + 1 < h).map(move |x| (y * w + x, y * w + w + x));
+            hor.chain(ver)
+        });
+        for (i, j) in events {
+            let (a, b) = (comp[i], comp[j]);
+            if a != 0 && b != 0 && a != b {
+                let e = pairs.entry((a.min(b), a.max(b))).or_default();
+                e.n += 2;
+                e.near += u32::from(near[i]) + u32::from(near[j]);
+                if gaps {
+                    e.gap += gap(i, b) + gap(j, a);
+                }
+            }
+        }
+        format!("{:?}", pairs.iter().map(|(k, b)| (*k, b.n, b.near, b.gap.to_bits())).collect::<Vec<_>>())
+            .into_bytes()
+    }
+
+    /// The near-edge mask is the 3 × 3 dilation of the edges, pixel by pixel.
+    #[test]
+    fn near_edges_is_the_3x3_dilation() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(37);
+        let (mut hor, mut near) = (Vec::new(), Vec::new());
+        for case in 0..200 {
+            let (w, h) = (rng.random_range(1..50usize), rng.random_range(1..30usize));
+            let p = [0.01, 0.05, 0.2][case % 3];
+            let edges = rangeimage::Grid::from_fn(w as u32, h as u32, |_, _| rng.random_bool(p));
+            near_edges(&edges, w, h, &mut hor, &mut near);
+            for y in 0..h {
+                for x in 0..w {
+                    let want = (y.saturating_sub(1)..(y + 2).min(h)).any(|yy| {
+                        (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| edges[(xx as u32, yy as u32)])
+                    });
+                    assert_eq!(near[y * w + x], want, "case {case} ({w}×{h}) at ({x}, {y})");
+                }
+            }
+        }
+    }
+
+    /// The pair table gives the map's pairs, counts and gap sums (bit for bit) on random label images of
+    /// patches with scattered noise and zeros, with one table reused throughout.
+    #[test]
+    fn border_table_matches_a_sorted_map() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(29);
+        let mut table = Borders::default();
+        for case in 0..200 {
+            let (w, h) = (rng.random_range(1..70usize), rng.random_range(1..40usize));
+            let (bw, bh) = (rng.random_range(1..20usize), rng.random_range(1..12usize));
+            let n = rng.random_range(1..30u32);
+            let noise = [0.0, 0.01, 0.1, 0.4][case % 4];
+            let comp: Vec<u32> = (0..w * h)
+                .map(|i| {
+                    let block = ((i % w) / bw * 7 + 3 * ((i / w) / bh)) as u32 % (n + 1);
+                    if rng.random_bool(noise) { rng.random_range(0..=n) } else { block }
+                })
+                .collect();
+            let near: Vec<bool> = (0..w * h).map(|_| rng.random_bool(0.3)).collect();
+            let range: Vec<f32> = (0..w * h)
+                .map(|_| if rng.random_bool(0.05) { f32::NAN } else { rng.random_range(50.0..90.0) })
+                .collect();
+            let planes: Vec<Plane> = (0..n)
+                .map(|_| Plane {
+                    normal: [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), 1.0],
+                    offset: rng.random_range(-80.0..-40.0),
+                    rms: 0.5,
+                })
+                .collect();
+            let scene = Scene { range: &range, w, h, camera: &rangeimage::Camera::Grid };
+            for gaps in [false, true] {
+                table.reset(n as usize, 4);
+                borders_into(&scene, &comp, &near, (&planes, gaps), &mut table);
+                let got = format!(
+                    "{:?}",
+                    table.entries.iter().map(|(k, b)| (*k, b.n, b.near, b.gap.to_bits())).collect::<Vec<_>>()
+                )
+                .into_bytes();
+                assert_eq!(got, borders_by_map(&scene, &comp, &near, &planes, gaps), "case {case}");
+            }
+        }
     }
 }

@@ -17,6 +17,22 @@ pub(crate) struct Buffers {
     seen: Vec<bool>,
     /// [`refit`]: the moments of each label.
     moments: Vec<Moments>,
+    /// The border pixels the last [`refine`] started from, in raster order, and every pixel it moved.
+    border: Vec<u32>,
+    moved: Vec<u32>,
+    /// Per pixel: moved or next to a moved pixel (all false between calls), and those pixels.
+    dirty: Vec<bool>,
+    dirty_list: Vec<u32>,
+}
+
+/// Where [`refine`] takes its first pass's candidates from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Start {
+    /// A scan of the whole image for border pixels.
+    Scan,
+    /// The border pixels of the last call, updated around the pixels it moved (the labels must be as that call
+    /// left them): the same list as a scan.
+    Update,
 }
 
 /// Moves border pixels of `groups` (a label per pixel, 0 = none; `planes[l − 1]` is the plane of
@@ -27,17 +43,28 @@ pub(crate) struct Buffers {
 pub(crate) fn refine(
     scene: &Scene<'_>,
     groups: &mut [u32],
-    planes: &[Plane],
+    (planes, start): (&[Plane], Start),
     limit: Limit,
     passes: u32,
     bufs: &mut Buffers,
 ) -> u32 {
     let (w, h) = (scene.w, scene.h);
-    let Buffers { cand, moves, seen, .. } = bufs;
-    seen.clear();
-    seen.resize(w * h, false);
+    let Buffers { cand, moves, seen, border, moved, dirty, dirty_list, .. } = bufs;
     // Candidates of the first pass: every labelled pixel with a differently labelled 8-neighbour.
-    border_pixels_into(groups, w, h, cand);
+    match start {
+        Start::Scan => {
+            seen.clear();
+            seen.resize(w * h, false);
+            border_pixels_into(groups, w, h, border);
+        }
+        Start::Update => update_border(groups, (w, h), border, moved, (dirty, dirty_list), cand),
+    }
+    moved.clear();
+    // Each list holds a pixel at most once (`moved` once per pass): room reserved once, touched as far as used.
+    moved.reserve(w * h);
+    cand.clear();
+    cand.reserve(w * h);
+    cand.extend_from_slice(border);
     let mut total = 0u32;
     for _ in 0..passes {
         moves.clear();
@@ -51,6 +78,7 @@ pub(crate) fn refine(
         for &(i, l) in moves.iter() {
             groups[i as usize] = l;
         }
+        moved.extend(moves.iter().map(|&(i, _)| i));
         total += moves.len() as u32;
         // Next candidates: the moved pixels' labelled neighbours (their best plane may have come
         // next to them), each once, in raster order.
@@ -123,6 +151,50 @@ fn border_pixels_into(groups: &[u32], w: usize, h: usize, cand: &mut Vec<u32>) {
             test(xx, y, cand);
         }
     }
+}
+
+/// Into `border`, the border pixels of `groups` (rows of `w`) in raster order, from `border`, the border pixels
+/// before the pixels `moved` changed label: only a moved pixel or one of its 8-neighbours can change status, so
+/// those (marked in `dirty`, listed in `list`) are tested again and merged with the others of the old list.
+/// `out` is working memory.
+fn update_border(
+    groups: &[u32],
+    (w, h): (usize, usize),
+    border: &mut Vec<u32>,
+    moved: &[u32],
+    (dirty, list): (&mut Vec<bool>, &mut Vec<u32>),
+    out: &mut Vec<u32>,
+) {
+    dirty.resize(w * h, false);
+    list.clear();
+    list.reserve(w * h);
+    for &i in moved {
+        let i = i as usize;
+        let mark = |j: usize, dirty: &mut Vec<bool>, list: &mut Vec<u32>| {
+            if !dirty[j] {
+                dirty[j] = true;
+                list.push(j as u32);
+            }
+        };
+        mark(i, dirty, list);
+        for_neighbours(i % w, i / w, w, h, |j, _, _| mark(j, dirty, list));
+    }
+    list.sort_unstable();
+    out.clear();
+    let mut old = border.iter().copied().filter(|&i| !dirty[i as usize]).peekable();
+    for &j in list.iter() {
+        while let Some(i) = old.next_if(|&i| i < j) {
+            out.push(i);
+        }
+        if is_border(groups, w, h, j as usize % w, j as usize / w) {
+            out.push(j);
+        }
+    }
+    out.extend(old);
+    for &j in list.iter() {
+        dirty[j as usize] = false;
+    }
+    std::mem::swap(border, out);
 }
 
 /// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
@@ -239,6 +311,38 @@ const SIGMA_FLOOR: f64 = 0.25;
 mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
+
+    /// The border list updated around random moves is the list a scan of the moved labels finds.
+    #[test]
+    fn updated_border_matches_a_scan() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(31);
+        let (mut border, mut out, mut want) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut dirty, mut list) = (Vec::new(), Vec::new());
+        for case in 0..300 {
+            let (w, h) = (rng.random_range(1..60usize), rng.random_range(1..40usize));
+            let (bw, bh) = (rng.random_range(1..30usize), rng.random_range(1..20usize));
+            let mut groups: Vec<u32> = (0..w * h)
+                .map(|i| {
+                    let block = ((i % w) / bw + 3 * ((i / w) / bh)) as u32 % 5;
+                    if rng.random_bool(0.02) { rng.random_range(0..5) } else { block }
+                })
+                .collect();
+            border_pixels_into(&groups, w, h, &mut border);
+            // Moves as refine makes them: labelled pixels to another nonzero label, some pixels twice.
+            let mut moved = Vec::new();
+            for _ in 0..rng.random_range(0..(w * h / 4 + 1)) {
+                let i = rng.random_range(0..w * h);
+                if groups[i] != 0 {
+                    groups[i] = rng.random_range(1..6);
+                    moved.push(i as u32);
+                }
+            }
+            update_border(&groups, (w, h), &mut border, &moved, (&mut dirty, &mut list), &mut out);
+            border_pixels_into(&groups, w, h, &mut want);
+            assert_eq!(border, want, "case {case} ({w}×{h})");
+            assert!(dirty.iter().all(|&d| !d), "case {case}: dirty flags left set");
+        }
+    }
 
     /// The chunked scan finds the same pixels as the rule at every pixel, on random label images of
     /// patches (so that chunks are skipped) with scattered noise and zeros.

@@ -53,12 +53,47 @@ fn boundaries_into(
         let (up, row, down) = (&l[(y - 1) * w..y * w], &l[y * w..(y + 1) * w], &l[(y + 1) * w..(y + 2) * w]);
         orow[0] = full(0, y);
         orow[w - 1] = full(w - 1, y);
-        for x in 1..w - 1 {
+        let mut test = |x: usize| {
             let c = row[x];
-            if c != row[x - 1] || c != row[x + 1] || c != up[x] || c != down[x] {
-                orow[x] = full(x, y);
+            let nb = [row[x - 1], row[x + 1], up[x], down[x]];
+            if nb.iter().any(|&m| m != c) {
+                orow[x] = interior_rule(c, nb, &is_region, separators);
             }
+        };
+        // Chunks of pixels whose four neighbours all carry their label are skipped by one test without branches.
+        const CHUNK: usize = 16;
+        let mut x = 1;
+        while x + CHUNK < w {
+            let cols = x..x + CHUNK;
+            let diff = row[cols.clone()]
+                .iter()
+                .zip(&row[x - 1..x - 1 + CHUNK])
+                .zip(&row[x + 1..x + 1 + CHUNK])
+                .zip(up[cols.clone()].iter().zip(&down[cols]))
+                .fold(0u32, |a, (((&c, &l), &r), (&u, &d))| a | (c ^ l) | (c ^ r) | (c ^ u) | (c ^ d));
+            if diff != 0 {
+                for xx in x..x + CHUNK {
+                    test(xx);
+                }
+            }
+            x += CHUNK;
         }
+        for xx in x..w - 1 {
+            test(xx);
+        }
+    }
+}
+
+/// [`boundary_at`] at a pixel with all four neighbours in the image: its label `c` and theirs, `nb`.
+#[inline(always)]
+fn interior_rule(c: u32, nb: [u32; 4], is_region: impl Fn(u32) -> bool, separators: bool) -> bool {
+    if is_region(c) {
+        nb.iter().any(|&m| is_region(m) && m != c)
+    } else if separators {
+        let mut it = nb.iter().filter(|&&m| is_region(m));
+        it.next().is_some_and(|&first| it.any(|&m| m != first))
+    } else {
+        false
     }
 }
 
@@ -109,11 +144,19 @@ mod tests {
             ((s >> 33) % u64::from(n)) as u32
         };
         for k in 0..300 {
-            let (w, h) = (1 + next(12), 1 + next(12));
+            // Wider images from case 150 on, so that chunks are skipped and tested too.
+            let (w, h) = (1 + next(if k < 150 { 12 } else { 60 }), 1 + next(12));
             let mut v = Vec::new();
-            for _ in 0..w * h {
-                // Mostly repeats of the previous label, so interior pixels of one label are common.
-                let l = if !v.is_empty() && next(4) > 0 { *v.last().unwrap() } else { next(4) };
+            for i in 0..w * h {
+                // Mostly repeats of the previous label, so interior pixels of one label are common; from case 150
+                // on, blocks 13 × 5 with scattered other labels.
+                let l = if k >= 150 {
+                    if next(30) == 0 { next(4) } else { (i % w / 13 + i / w / 5) % 3 }
+                } else if !v.is_empty() && next(4) > 0 {
+                    *v.last().unwrap()
+                } else {
+                    next(4)
+                };
                 v.push(l);
             }
             let labels = Grid::from_vec(w, h, v).unwrap();
