@@ -353,6 +353,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "Default mode: the region plane is refitted after max(this, n / 4) additions.",
     ),
     (
+        "regiongrow.release_max_px",
+        "Default mode: a region that stops growing with at most this many pixels releases those that fail the growth test against its own fit (0 = never).",
+    ),
+    (
         "regiongrow.merge_max_angle_deg",
         "Default mode: adjacent regions merge only if their normals are within this angle.",
     ),

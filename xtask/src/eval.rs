@@ -98,7 +98,8 @@ pub fn run(root: &Path, args: &[String]) -> Result<()> {
     if o.seeds > 1 {
         let mut first = crate::seeds::Totals { seed: config.seed, ..Default::default() };
         for r in &report.rows {
-            first.add(&r.scores.hoover_final, &r.scores.hoover_regiongrow, &r.scores.jin_final);
+            let s = &r.scores;
+            first.add(&s.hoover_final, &s.hoover_regiongrow, &s.jin_final, s.relaxed.matched.f);
         }
         let mut runs = vec![first];
         runs.extend(crate::seeds::other_seeds(&set, &config, o.seeds)?);

@@ -32,11 +32,14 @@ pub(crate) struct Totals {
     pub under: u32,
     /// GT planes detected by Jin et al.'s rule (final segmentation).
     pub jin_detected: u32,
+    /// Sum over the images of the final edge map's one-to-one F.
+    pub f_final: f64,
 }
 
 impl Totals {
-    /// Adds one image's counts: Hoover of the final segmentation and of region growing alone, Jin of the final one.
-    pub(crate) fn add(&mut self, fin: &HooverScore, regiongrow: &HooverScore, jin: &JinScore) {
+    /// Adds one image's scores: Hoover of the final segmentation and of region growing alone, Jin of the final one,
+    /// the final edge map's F.
+    pub(crate) fn add(&mut self, fin: &HooverScore, regiongrow: &HooverScore, jin: &JinScore, f_final: f64) {
         self.images += 1;
         self.gt += fin.gt_regions;
         self.correct += fin.correct;
@@ -44,10 +47,11 @@ impl Totals {
         self.over += fin.over;
         self.under += fin.under;
         self.jin_detected += jin.detected;
+        self.f_final += f_final;
     }
 
-    /// Per-image means of (correct, region growing alone, over, under), and the Jin rate in %.
-    fn means(&self) -> [f64; 5] {
+    /// Per-image means of (correct, region growing alone, over, under), the Jin rate in %, and the mean F.
+    fn means(&self) -> [f64; 6] {
         let n = f64::from(self.images.max(1));
         [
             f64::from(self.correct) / n,
@@ -55,6 +59,7 @@ impl Totals {
             f64::from(self.over) / n,
             f64::from(self.under) / n,
             100.0 * f64::from(self.jin_detected) / f64::from(self.gt.max(1)),
+            self.f_final / n,
         ]
     }
 }
@@ -77,13 +82,16 @@ pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<
                             hoover(&out.fin.labels, &out.fin.final_regions),
                             hoover(&out.regions.labels, &out.regions.regions),
                             rangeseg::evaluate::jin(&img.gt, &out.fin.labels),
+                            rangeseg::evaluate::score_edges(out.fin.edges(), &out.regions.c1, &img.gt)
+                                .matched
+                                .f,
                         )
                     })
                 })
                 .collect();
             let mut t = Totals { seed: cfg.seed, ..Totals::default() };
-            for (fin, rg, jin) in &scores {
-                t.add(fin, rg, jin);
+            for (fin, rg, jin, f) in &scores {
+                t.add(fin, rg, jin, *f);
             }
             Ok(t)
         })
@@ -93,10 +101,10 @@ pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<
 /// Writes `seeds.csv` (one row per seed: per-image means) into `out` and returns the terminal line: the mean and
 /// the range over the runs of each count.
 pub(crate) fn report(name: &str, runs: &[Totals], out: &Path) -> Result<String> {
-    let mut csv = String::from("seed,images,correct,correct_regiongrow,over,under,jin_rate_pct\n");
+    let mut csv = String::from("seed,images,correct,correct_regiongrow,over,under,jin_rate_pct,f_final\n");
     for t in runs {
-        let [c, rg, o, u, j] = t.means();
-        writeln!(csv, "{},{},{c:.4},{rg:.4},{o:.4},{u:.4},{j:.2}", t.seed, t.images).expect("string");
+        let [c, rg, o, u, j, f] = t.means();
+        writeln!(csv, "{},{},{c:.4},{rg:.4},{o:.4},{u:.4},{j:.2},{f:.4}", t.seed, t.images).expect("string");
     }
     let path = out.join("seeds.csv");
     rangeio::write_atomic(&path, csv.as_bytes())
@@ -110,7 +118,7 @@ pub(crate) fn report(name: &str, runs: &[Totals], out: &Path) -> Result<String> 
     let gt = runs.first().map_or(0.0, |t| f64::from(t.gt) / f64::from(t.images.max(1)));
     let f = |(m, lo, hi): (f64, f64, f64), p: usize| format!("{m:.p$} ({lo:.p$}–{hi:.p$})");
     Ok(format!(
-        "{name}, {} seeds ({}–{}): Hoover T=0.8 correct {} of {gt:.2}, region growing alone {}, over {}, under {}, Jin rate {} %",
+        "{name}, {} seeds ({}–{}): Hoover T=0.8 correct {} of {gt:.2}, region growing alone {}, over {}, under {}, Jin rate {} %, final F {}",
         runs.len(),
         runs.iter().map(|t| t.seed).min().unwrap_or(0),
         runs.iter().map(|t| t.seed).max().unwrap_or(0),
@@ -119,6 +127,7 @@ pub(crate) fn report(name: &str, runs: &[Totals], out: &Path) -> Result<String> 
         f(stat(2), 2),
         f(stat(3), 2),
         f(stat(4), 1),
+        f(stat(5), 3),
     ))
 }
 
@@ -152,26 +161,27 @@ mod tests {
     fn the_line_gives_each_count_s_mean_and_range_over_the_seeds() {
         // Two images per run; seed 7: 3 + 5 correct of 10 + 10, seed 8: 4 + 6.
         let mut a = Totals { seed: 7, ..Totals::default() };
-        a.add(&hoover(10, 3, 1, 0), &hoover(10, 2, 0, 0), &jin(10, 4));
-        a.add(&hoover(10, 5, 0, 1), &hoover(10, 5, 0, 0), &jin(10, 6));
+        a.add(&hoover(10, 3, 1, 0), &hoover(10, 2, 0, 0), &jin(10, 4), 0.5);
+        a.add(&hoover(10, 5, 0, 1), &hoover(10, 5, 0, 0), &jin(10, 6), 0.7);
         let mut b = Totals { seed: 8, ..Totals::default() };
-        b.add(&hoover(10, 4, 0, 0), &hoover(10, 4, 0, 0), &jin(10, 8));
-        b.add(&hoover(10, 6, 2, 0), &hoover(10, 3, 0, 0), &jin(10, 8));
+        b.add(&hoover(10, 4, 0, 0), &hoover(10, 4, 0, 0), &jin(10, 8), 0.8);
+        b.add(&hoover(10, 6, 2, 0), &hoover(10, 3, 0, 0), &jin(10, 8), 0.9);
         let dir = std::env::temp_dir().join(format!("xtask-seeds-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let line = report("set", &[a, b], &dir).unwrap();
         assert_eq!(
             line,
             "set, 2 seeds (7–8): Hoover T=0.8 correct 4.50 (4.00–5.00) of 10.00, region growing alone 3.50 \
-             (3.50–3.50), over 0.75 (0.50–1.00), under 0.25 (0.00–0.50), Jin rate 65.0 (50.0–80.0) %"
+             (3.50–3.50), over 0.75 (0.50–1.00), under 0.25 (0.00–0.50), Jin rate 65.0 (50.0–80.0) %, final F 0.725 \
+             (0.600–0.850)"
         );
         let csv = std::fs::read_to_string(dir.join("seeds.csv")).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(
             csv,
-            "seed,images,correct,correct_regiongrow,over,under,jin_rate_pct\n\
-             7,2,4.0000,3.5000,0.5000,0.5000,50.00\n\
-             8,2,5.0000,3.5000,1.0000,0.0000,80.00\n"
+            "seed,images,correct,correct_regiongrow,over,under,jin_rate_pct,f_final\n\
+             7,2,4.0000,3.5000,0.5000,0.5000,50.00,0.6000\n\
+             8,2,5.0000,3.5000,1.0000,0.0000,80.00,0.8500\n"
         );
     }
 }

@@ -882,7 +882,45 @@ fn grow_default<const N: usize>(
             }
         }
     }
+    if count <= params.release_max_px as usize {
+        count = release(ctx, (id, cos_max, max_res, rms_ratio), labels, queue, count);
+    }
     count
+}
+
+/// The pixels of region `id` (listed in `queue`, `count` of them still labelled `id`) that fail the growth test
+/// (`cos_max`, `max(max_res, rms_ratio × RMS)`) against the plane fitted to the region are unlabelled, again while
+/// any is (see `Params::release_max_px`); returns how many pixels the region keeps.
+fn release(
+    ctx: &Ctx<'_>,
+    (id, cos_max, max_res, rms_ratio): (u32, f64, f64, f64),
+    labels: &mut [u32],
+    queue: &[u32],
+    mut count: usize,
+) -> usize {
+    let geo = ctx.geo;
+    loop {
+        let mut mom = Moments::default();
+        for &p in queue.iter().filter(|&&p| labels[p as usize] == id) {
+            mom.add(point_of(&geo[p as usize]));
+        }
+        let Some(plane) = Plane::fit(&mom, |p| ctx.toward(p)) else { return count };
+        let lim = max_res.max(rms_ratio * plane.mean_sq.max(0.0).sqrt());
+        let before = count;
+        for &p in queue {
+            let g = &geo[p as usize];
+            if labels[p as usize] == id
+                && (plane.distance(point_of(g)).abs() > lim
+                    || dot(normal_of(g), plane.normal).abs() < cos_max)
+            {
+                labels[p as usize] = 0;
+                count -= 1;
+            }
+        }
+        if count == before {
+            return count;
+        }
+    }
 }
 
 /// Paper mode: grows region `id` from `seed`; a neighbour joins if its K is within
@@ -1138,6 +1176,54 @@ mod tests {
                 assert_eq!(queue, reference, "{w}x{h}, {zero_share}");
             }
         }
+    }
+
+    /// `release` unlabels the pixels of a region that fail the growth test against the plane fitted to the region
+    /// (a normal 60° off the plane; a point 10 units off it), keeps the others, and leaves a region that passes its
+    /// own test as it is.
+    #[test]
+    fn release_frees_what_the_region_s_own_plane_rejects() {
+        let (w, h) = (12usize, 10usize);
+        let pw = w + 2;
+        let mut geo = vec![[f32::NAN; 6]; pw * (h + 2)];
+        let mut queue = Vec::new();
+        let (tilted, far) = ((2, 1), (7, 6));
+        let (s, c) = (60f32.to_radians().sin(), 60f32.to_radians().cos());
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y + 1) * pw + x + 1;
+                let z = if (x, y) == far { 10.0 } else { 0.01 * x as f32 };
+                // Grid camera: the sensor looks along −z.
+                let n = if (x, y) == tilted { [0.0, -s, -c] } else { [0.0, 0.0, -1.0] };
+                geo[i] = [x as f32, y as f32, z, n[0], n[1], n[2]];
+                queue.push(i as u32);
+            }
+        }
+        let k = vec![0.0; geo.len()];
+        let p = pw as isize;
+        let ctx = Ctx {
+            w,
+            h,
+            pw,
+            offs: [-1, -p, 1, p, -p - 1, -p + 1, p - 1, p + 1],
+            eight: false,
+            geo: &geo,
+            k: &k,
+            origin: [0.0; 3],
+            camera: &Camera::Grid,
+        };
+        let id = 3;
+        let mut labels = vec![0u32; geo.len()];
+        queue.iter().for_each(|&q| labels[q as usize] = id);
+        let test = (id, 40f64.to_radians().cos(), 3.0, 3.0);
+        let kept = release(&ctx, test, &mut labels, &queue, queue.len());
+        let at = |labels: &[u32], (x, y): (usize, usize)| labels[(y + 1) * pw + x + 1];
+        assert_eq!(kept, w * h - 2);
+        assert_eq!((at(&labels, tilted), at(&labels, far)), (0, 0), "both released");
+        assert_eq!(queue.iter().filter(|&&q| labels[q as usize] == id).count(), kept, "the others kept");
+        let before = labels.clone();
+        assert_eq!(release(&ctx, test, &mut labels, &queue, kept), kept, "a fixpoint");
+        assert_eq!(labels, before);
     }
 
     /// `seed_candidates` gives the candidates of the pixel-by-pixel loop, in the same order, on random grids

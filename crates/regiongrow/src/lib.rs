@@ -24,7 +24,9 @@
 //!    and its 3D point lies within `max(max_residual, residual_rms_ratio × RMS)` of the region's
 //!    plane, RMS being the region's distance to its own plane at the last refit. The region plane starts
 //!    as the seed's local plane and is refitted from running 3D moments after
-//!    `max(refit_every_px, n / 4)` additions (so O(log n) refits per region).
+//!    `max(refit_every_px, n / 4)` additions (so O(log n) refits per region). A region that stops at
+//!    `release_max_px` pixels or fewer is fitted to all of them, and those that fail the test against that
+//!    plane are released (unlabelled, free for later seeds), again while any is.
 //!    Local normals come from the features' local plane slopes `(a, b)` back-projected through the
 //!    camera at the pixel's range value.
 //! 3. **Merge**: adjacent regions with `|mean K₁ − mean K₂| < t_m` (default mode: and normals within
@@ -114,6 +116,13 @@ pub struct Params {
     pub max_slant_deg: f32,
     /// Default mode: the region plane is refitted after `max(refit_every_px, n / 4)` additions.
     pub refit_every_px: u32,
+    /// Default mode: a region that stops growing with at most this many pixels is fitted to all of them, and its
+    /// pixels that fail the growth test (normal angle, residual limit) against that plane go back to the pool,
+    /// again while any does (0 = never). Such a region is a seed on a crease, whose local plane lies between the
+    /// two faces, or on a face whose noise exceeds its pixel spacing, where a fit on a few pixels is mostly noise
+    /// and growth stops: it would be dropped under `min_region_px` unless a merge saved it, and meanwhile its
+    /// pixels kept the regions grown later from the crease or the face.
+    pub release_max_px: u32,
     /// Default mode: adjacent regions merge only if their normals are within this angle.
     pub merge_max_angle_deg: f32,
     /// Default mode: adjacent regions merge only if each one's RMS distance to the other's plane
@@ -162,6 +171,7 @@ impl Default for Params {
             residual_rms_ratio: 3.0,
             max_slant_deg: 80.0,
             refit_every_px: 16,
+            release_max_px: 16,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 4.0,
             merge_joint_rms_ratio: 1.2,
