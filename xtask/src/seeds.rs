@@ -2,10 +2,10 @@
 //!
 //! Region growing draws its seeds in a random order (`seed` of the configuration). On the NYU frames one seed's mean
 //! correct count lies anywhere in 3.35–3.75 of 7.80, so a change that moves a data set by 0.1 can be noise. With
-//! `--seeds N` the evaluation runs again with the seeds `seed + 1 … seed + N − 1` (Hoover at T = 0.8 and Jin et
-//! al.'s rate only, no files but `seeds.csv`) and reports the mean and range over all `N`.
+//! `--seeds N` the evaluation runs again with the seeds `seed + 1 … seed + N − 1` (Hoover at T = 0.8, Jin et al.'s
+//! rate and the final edge map's F; no files but `seeds.csv`) and reports the mean and range over all `N`.
 
-use crate::data::{DataSet, LoadedImage};
+use crate::data::DataSet;
 use anyhow::{Context, Result};
 use eval::{HooverScore, JinScore};
 use rangeseg::Config;
@@ -66,16 +66,18 @@ impl Totals {
 
 /// Runs the images of `set` with the seeds `config.seed + 1 … + (n − 1)`, and returns those runs' totals.
 pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<Totals>> {
-    let images: Vec<LoadedImage> = set.images.par_iter().map(|img| img.load()).collect::<Result<_>>()?;
     (1..u64::from(n))
         .map(|k| {
             let mut cfg = config.clone();
             cfg.seed = config.seed.wrapping_add(k);
             let segs = rangeseg::pipeline::Segmenters::for_current_pool(&cfg);
-            let scores: Vec<_> = images
+            // Each image is read again for each seed, as the first run reads it: one image in memory per thread.
+            let scores: Vec<(HooverScore, HooverScore, JinScore, f64)> = set
+                .images
                 .par_iter()
                 .map(|img| {
-                    segs.with(|seg| {
+                    let img = img.load()?;
+                    Ok(segs.with(|seg| {
                         let out = seg.segment(&img.frame.range, &img.frame.camera);
                         let hoover = |l, r| rangeseg::evaluate::hoover(&img.gt, l, r, &img.angles);
                         (
@@ -86,9 +88,9 @@ pub(crate) fn other_seeds(set: &DataSet, config: &Config, n: u32) -> Result<Vec<
                                 .matched
                                 .f,
                         )
-                    })
+                    }))
                 })
-                .collect();
+                .collect::<Result<_>>()?;
             let mut t = Totals { seed: cfg.seed, ..Totals::default() };
             for (fin, rg, jin, f) in &scores {
                 t.add(fin, rg, jin, *f);
