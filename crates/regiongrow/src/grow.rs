@@ -707,8 +707,8 @@ enum Stale<'a> {
 }
 
 /// After a [`merge`] into `bufs` that unlabelled the regions of fewer than `min` pixels: which labels are still in
-/// the image, and how many regions were dropped (the merge's roots with pixels, under `min`). Growth gave every
-/// label its seed, so the labels present before the drop are the roots with pixels.
+/// the image, and how many regions were dropped (the merge's roots with pixels, under `min`). The labels present
+/// before the drop are the roots with pixels (a label whose pixels growth released entirely has none).
 fn dropped(bufs: &MergeBufs, min: u32) -> (Vec<bool>, u32) {
     let stats = &bufs.stats;
     let present: Vec<bool> =
@@ -859,11 +859,7 @@ fn grow_default<const N: usize>(
             if labels[j] != 0 {
                 continue;
             }
-            let g = &geo[j];
-            if plane.distance(point_of(g)).abs() > lim {
-                continue;
-            }
-            if dot(normal_of(g), plane.normal).abs() < cos_max {
+            if rejects(&plane, &geo[j], lim, cos_max) {
                 continue;
             }
             labels[j] = id;
@@ -888,6 +884,13 @@ fn grow_default<const N: usize>(
     count
 }
 
+/// The growth test of the default mode fails for the pixel `g` against `plane`: its 3D point lies farther than `lim`
+/// from the plane, or its normal makes an angle whose cosine is under `cos_max` with the plane's.
+#[inline(always)] // into the growth loop, compiled for each instruction set
+fn rejects(plane: &Plane, g: &[f32; 6], lim: f64, cos_max: f64) -> bool {
+    plane.distance(point_of(g)).abs() > lim || dot(normal_of(g), plane.normal).abs() < cos_max
+}
+
 /// The pixels of region `id` (listed in `queue`, `count` of them still labelled `id`) that fail the growth test
 /// (`cos_max`, `max(max_res, rms_ratio × RMS)`) against the plane fitted to the region are unlabelled, again while
 /// any is (see `Params::release_max_px`); returns how many pixels the region keeps.
@@ -908,11 +911,7 @@ fn release(
         let lim = max_res.max(rms_ratio * plane.mean_sq.max(0.0).sqrt());
         let before = count;
         for &p in queue {
-            let g = &geo[p as usize];
-            if labels[p as usize] == id
-                && (plane.distance(point_of(g)).abs() > lim
-                    || dot(normal_of(g), plane.normal).abs() < cos_max)
-            {
+            if labels[p as usize] == id && rejects(&plane, &geo[p as usize], lim, cos_max) {
                 labels[p as usize] = 0;
                 count -= 1;
             }
@@ -1000,10 +999,7 @@ fn seed_ok(ctx: &Ctx<'_>, params: &Params, c: usize, radius: usize, labels: &[u3
                     }
                 }
                 Some(pl) => {
-                    let g = &ctx.geo[j];
-                    if pl.distance(point_of(g)).abs() > max_res
-                        || dot(normal_of(g), pl.normal).abs() < cos_max
-                    {
+                    if rejects(pl, &ctx.geo[j], max_res, cos_max) {
                         return false;
                     }
                 }
