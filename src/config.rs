@@ -129,6 +129,7 @@ impl Config {
         // The specification fills every left-over pixel.
         c.segment.fill_max_residual = 0.0;
         c.segment.refine_passes = 0;
+        c.segment.crease_passes = 0;
         c.segment.bend_max_angle_deg = 0.0;
         c
     }
@@ -458,6 +459,14 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.bend_fit_ratio",
         "Regions mode: a sharper bend still merges if the joint plane fits each region within this × the larger region RMS (0 = off).",
+    ),
+    (
+        "segment.crease_passes",
+        "Passes giving each pixel beside a crease to the region whose plane its line of sight sees (0 = off).",
+    ),
+    (
+        "segment.crease_min_angle_deg",
+        "Smallest angle between two regions' normals for crease_passes to place the border between them.",
     ),
 ];
 

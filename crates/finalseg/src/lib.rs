@@ -1,9 +1,10 @@
 //! The final segmentation (docs/method.md §3.4 step 4): regions from the relaxed edge map,
 //! optionally guided by the region-growing labels and merged where the relaxed edges do not
 //! support a border. One entry point, [`segment`]; its steps live in one module each
-//! (`components`, `fill`, `merge`; the region planes in `plane`).
+//! (`components`, `fill`, `merge`, `refine`, `crease`; the region planes in `plane`).
 
 mod components;
+mod crease;
 mod fill;
 mod merge;
 mod params;
@@ -55,6 +56,12 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    Potts energy, so noise does not fray the border; within the fill limit), up to
 ///    `refine_passes` passes of one pixel each, every pass decided from the previous one: a
 ///    border that growth or an edge left off the crease moves to where the planes meet.
+/// 6. Crease pixels (`crease_passes` > 0): where two adjacent regions meet at a crease (normals more
+///    than `crease_min_angle_deg` apart; each region behind the other's plane, or each in front), a
+///    border pixel within two noise scales of the other region's plane goes to the region whose plane
+///    its line of sight sees (at a convex crease the plane it meets last, at a concave one the first),
+///    by the planes refitted on the refined regions, up to `crease_passes` passes of one pixel each:
+///    the distances cannot place pixels that lie within the noise of both planes, the planes can.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -97,9 +104,11 @@ pub struct Scratch {
     /// Step 5: the refinement's buffers and the planes refitted on the refined regions.
     refine: refine::Buffers,
     refitted: Vec<Plane>,
-    /// Steps 2 and 5: the 3D points of one row.
+    /// Step 6: the crease step's buffers.
+    crease: crease::Buffers,
+    /// Steps 2, 5 and 6: the 3D points of one row.
     row: Vec<[f64; 3]>,
-    /// Steps 4–6: the merge forest, the root of each label, the final label of each root and the roots in
+    /// Steps 4–7: the merge forest, the root of each label, the final label of each root and the roots in
     /// order of first pixel.
     parent: Vec<u32>,
     root: Vec<u32>,
@@ -145,6 +154,7 @@ pub fn segment_into(
         merge: mbufs,
         refine: rbufs,
         refitted,
+        crease: crbufs,
         row,
         parent,
         root,
@@ -179,8 +189,28 @@ pub fn segment_into(
         merge::merge_unsupported(&scene, edges, &mut pieces, parent, params, mbufs);
     }
 
+    // 5–6. Border pixels to the adjacent plane that fits them best; crease pixels to the face their line of
+    //      sight sees.
+    place_borders(&scene, &mut pieces, parent, (params, limit), (root, refitted, row), (rbufs, crbufs));
+
+    // 7. Consecutive labels in raster order; region statistics.
+    pieces.relabel((parent, root, map, order), (w, h), (labels, out));
+    (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
+}
+
+/// Steps 5 and 6 of [`segment_into`] on the merged groups of `parent`: border refinement and crease pixels, each
+/// when its passes are on; `root`, `refitted` and `row` are working memory, `rbufs` and `crbufs` the steps' buffers.
+fn place_borders(
+    scene: &Scene<'_>,
+    pieces: &mut Pieces,
+    parent: &mut [u32],
+    (params, limit): (&Params, fill::Limit),
+    (root, refitted, row): (&mut Vec<u32>, &mut Vec<Plane>, &mut Vec<[f64; 3]>),
+    (rbufs, crbufs): (&mut refine::Buffers, &mut crease::Buffers),
+) {
+    let (w, h) = (scene.w, scene.h);
     // 5. Border pixels to the adjacent plane that fits them best.
-    if params.refine_passes > 0 {
+    if params.refine_passes > 0 || params.crease_passes > 0 {
         // Each pixel to its merged group's root, through a table of the roots (none to rewrite if nothing merged).
         root.clear();
         root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
@@ -189,22 +219,40 @@ pub fn segment_into(
                 *l = root[*l as usize];
             }
         }
+    }
+    // The planes refitted on the refined regions, once there are any (`rbufs` holds their moments).
+    let mut refit_done = false;
+    if params.refine_passes > 0 {
         // A second round against planes refitted on the refined regions: a plane that the
         // misplaced pixels had tilted now lets the rest of them go. (The reported planes stay
         // those of the core pixels.)
         let (passes, first) = (params.refine_passes, (&pieces.planes[..], refine::Start::Scan));
-        if refine::refine(&scene, &mut pieces.comp, first, limit, passes, rbufs) > 0 {
+        if refine::refine(scene, &mut pieces.comp, first, limit, passes, rbufs) > 0 {
             refitted.clear();
             refitted.extend_from_slice(&pieces.planes);
-            refine::refit(&scene, &pieces.comp, refitted, (rbufs, row));
+            refine::refit(scene, &pieces.comp, refitted, (&mut *rbufs, &mut *row));
+            refit_done = true;
             let second = (&refitted[..], refine::Start::Update);
-            refine::refine(&scene, &mut pieces.comp, second, limit, passes, rbufs);
+            refine::refine(scene, &mut pieces.comp, second, limit, passes, rbufs);
         }
     }
 
-    // 6. Consecutive labels in raster order; region statistics.
-    pieces.relabel((parent, root, map, order), (w, h), (labels, out));
-    (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
+    // 6. Crease pixels to the face their line of sight sees, by the planes of the refined regions.
+    if params.crease_passes > 0 {
+        if !refit_done {
+            refitted.clear();
+            refitted.extend_from_slice(&pieces.planes);
+            refine::refit(scene, &pieces.comp, refitted, (&mut *rbufs, &mut *row));
+        }
+        // The refinement's border list is that of the current labels, once updated around its last moves.
+        let given = params.refine_passes > 0;
+        if given {
+            rbufs.border_after(&pieces.comp, (w, h), crbufs.border_mut());
+        }
+        let fits = (&refitted[..], rbufs.moments());
+        let crease_params = (params.crease_min_angle_deg, params.crease_passes);
+        crease::creases(scene, &mut pieces.comp, fits, crease_params, given, crbufs);
+    }
 }
 
 /// The read-only inputs every step reads: the range values, the image size and the camera.
@@ -505,7 +553,7 @@ mod tests {
             let (labels, _) = segment(&range, &Camera::Grid, &edges, None, p);
             (0..30).map(|y| labels[(x, y)]).collect::<Vec<_>>()
         };
-        let off = Params { refine_passes: 0, ..base.clone() };
+        let off = Params { refine_passes: 0, crease_passes: 0, ..base.clone() };
         assert!(column(&off, 32).iter().all(|&l| l == 1), "without refinement x = 32 stays left");
         for x in 31..=32 {
             assert!(column(&base, x).iter().all(|&l| l == 2), "x = {x} moves to the right plane");
@@ -532,7 +580,7 @@ mod tests {
             let (labels, _) = segment(&range, &Camera::Grid, &edges, None, p);
             (0..40).map(|y| labels[(x, y)]).collect::<Vec<_>>()
         };
-        let off = Params { refine_passes: 0, ..base.clone() };
+        let off = Params { refine_passes: 0, crease_passes: 0, ..base.clone() };
         assert!(column(&off, 33).iter().all(|&l| l == 1), "without refinement the leaked band stays left");
         for x in 32..=35 {
             assert!(column(&base, x).iter().all(|&l| l == 2), "x = {x} moves to the right plane");

@@ -84,6 +84,13 @@ pub struct Params {
     /// this multiple of the larger of their own RMS residuals (the regions' own normals are unreliable:
     /// thin terraces of a quantised slope); 0 = off.
     pub bend_fit_ratio: f64,
+    /// Passes placing the pixels beside a crease (0 = off): where two adjacent regions meet at a crease (their
+    /// normals more than `crease_min_angle_deg` apart, each region behind the other's plane or each in front), a
+    /// border pixel within the noise of both planes goes to the region whose plane its line of sight sees (at a
+    /// convex crease the plane it meets last, at a concave one the plane it meets first), one pixel per pass.
+    pub crease_passes: u32,
+    /// Smallest angle between two regions' normals for `crease_passes` to place their common border.
+    pub crease_min_angle_deg: f64,
 }
 
 impl Default for Params {
@@ -104,6 +111,8 @@ impl Default for Params {
             bend_max_angle_deg: 30.0,
             bend_max_gap: 1.5,
             bend_fit_ratio: 2.0,
+            crease_passes: 3,
+            crease_min_angle_deg: 20.0,
         }
     }
 }
@@ -124,6 +133,7 @@ impl Params {
         ParamError::in_range("segment.bend_max_angle_deg", self.bend_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
         ParamError::at_least("segment.bend_fit_ratio", self.bend_fit_ratio, 0.0)?;
+        ParamError::in_range("segment.crease_min_angle_deg", self.crease_min_angle_deg, 0.0, 90.0)?;
         Ok(())
     }
 }

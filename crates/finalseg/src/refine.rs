@@ -25,6 +25,25 @@ pub(crate) struct Buffers {
     dirty_list: Vec<u32>,
 }
 
+impl Buffers {
+    /// The moments of each label's points as the last [`refit`] summed them.
+    pub(crate) fn moments(&self) -> &[Moments] {
+        &self.moments
+    }
+
+    /// Into `out`, the border pixels of `groups` (labels as the last [`refine`] left them, which started from a
+    /// scan or an update of these buffers) in raster order: that call's start list updated around its moves.
+    pub(crate) fn border_after(&mut self, groups: &[u32], (w, h): (usize, usize), out: &mut Vec<u32>) {
+        let Buffers { cand, border, moved, dirty, dirty_list, .. } = self;
+        update_border(groups, (w, h), border, moved, (dirty, dirty_list), cand);
+        moved.clear();
+        out.clear();
+        // Room for every pixel once, so later frames reuse the memory.
+        out.reserve(w * h);
+        out.extend_from_slice(border);
+    }
+}
+
 /// Where [`refine`] takes its first pass's candidates from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Start {
@@ -115,7 +134,7 @@ fn is_border(groups: &[u32], w: usize, h: usize, x: usize, y: usize) -> bool {
 /// Every labelled pixel of `groups` (rows of `w`) with an 8-neighbour of another nonzero label, in raster
 /// order, into `cand`. In the interior rows, a chunk of pixels whose 3-row window holds one label is skipped
 /// whole (none of them can be a border pixel); the others go through [`is_border`].
-fn border_pixels_into(groups: &[u32], w: usize, h: usize, cand: &mut Vec<u32>) {
+pub(crate) fn border_pixels_into(groups: &[u32], w: usize, h: usize, cand: &mut Vec<u32>) {
     const CHUNK: usize = 16;
     cand.clear();
     let test = |x: usize, y: usize, cand: &mut Vec<u32>| {
@@ -305,7 +324,7 @@ const BETA: f64 = 2.5;
 const OUTLIER: f64 = 1.0;
 /// Smallest noise scale of the refinement energy, in working units (where the NYU and Kinect frames have σ = 0.25,
 /// ABW 0.34–0.49, the synthetic benchmark 0.67): a floor for noise-free planes, below every real image's noise.
-const SIGMA_FLOOR: f64 = 0.25;
+pub(crate) const SIGMA_FLOOR: f64 = 0.25;
 
 #[cfg(test)]
 mod tests {
