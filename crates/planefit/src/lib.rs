@@ -10,9 +10,10 @@
 //!
 //! [`noise`] measures an image's own depth noise and quantisation step from local plane fits.
 
+pub mod eigen3;
 pub mod noise;
 
-use nalgebra::{Matrix3, SymmetricEigen};
+use nalgebra::Matrix3;
 
 /// First and second moments of a set of 3D points, in `f64`.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -80,26 +81,28 @@ impl Moments {
     /// Covariance matrix (divided by n; the zero matrix for an empty set).
     #[must_use]
     pub fn covariance(&self) -> Matrix3<f64> {
+        let c = self.covariance_rows();
+        Matrix3::from_fn(|r, k| c[r][k])
+    }
+
+    /// [`covariance`](Self::covariance) as rows.
+    #[must_use]
+    pub fn covariance_rows(&self) -> [[f64; 3]; 3] {
         let n = self.n.max(1.0);
         let c = self.centroid();
         let e = |k: usize, a: usize, b: usize| self.ss[k] / n - c[a] * c[b];
         let (xx, xy, xz, yy, yz, zz) =
             (e(0, 0, 0), e(1, 0, 1), e(2, 0, 2), e(3, 1, 1), e(4, 1, 2), e(5, 2, 2));
-        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+        [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
     }
 
-    /// The eigen-decomposition of [`covariance`](Self::covariance) (nalgebra's symmetric solver).
+    /// The eigen-decomposition of [`covariance`](Self::covariance) (nalgebra's symmetric solver, bit for bit:
+    /// [`eigen3::symmetric_eigen3`]).
     #[must_use]
     pub fn axes(&self) -> Axes {
-        let eig = SymmetricEigen::new(self.covariance());
-        let v = |k: usize| {
-            let c = eig.eigenvectors.column(k);
-            [c[0], c[1], c[2]]
-        };
-        Axes {
-            values: [eig.eigenvalues[0], eig.eigenvalues[1], eig.eigenvalues[2]],
-            vectors: [v(0), v(1), v(2)],
-        }
+        let (values, q) = eigen3::symmetric_eigen3(self.covariance_rows(), true);
+        let v = |k: usize| [q[0][k], q[1][k], q[2][k]];
+        Axes { values, vectors: [v(0), v(1), v(2)] }
     }
 }
 

@@ -59,18 +59,19 @@ impl Plane {
     }
 
     /// `Plane::fit(m, ..).map(|p| p.mean_sq)` (the same bits; the orientation does not change it) from the
-    /// eigenvalues alone: nalgebra computes them by the same operations with or without the eigenvectors, and a
-    /// finite covariance has finite unit eigenvectors, so only the eigenvalue tests of [`Plane::fit`] can fail.
-    /// A covariance with a non-finite entry goes through [`Plane::fit`].
+    /// eigenvalues alone: the solver (nalgebra's, as copied in `planefit::eigen3`) computes them by the same
+    /// operations with or without the eigenvectors, and a finite covariance has finite unit eigenvectors, so only
+    /// the eigenvalue tests of [`Plane::fit`] can fail. A covariance with a non-finite entry goes through
+    /// [`Plane::fit`].
     pub(crate) fn fit_mean_sq(m: &Moments) -> Option<f64> {
         if m.n < 3.0 {
             return None;
         }
-        let cov = m.covariance();
-        if !cov.iter().all(|v| v.is_finite()) {
+        let cov = m.covariance_rows();
+        if !cov.iter().flatten().all(|v| v.is_finite()) {
             return Plane::fit(m, |_| [0.0, 0.0, 1.0]).map(|p| p.mean_sq);
         }
-        let ev = cov.symmetric_eigenvalues();
+        let (ev, _) = planefit::eigen3::symmetric_eigen3(cov, false);
         // As in `fit`: ascending, ties in index order.
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&i, &j| ev[i].total_cmp(&ev[j]));
