@@ -114,6 +114,36 @@ fn plane_sums(packed: &[f64; 21], rhs: &[f64; 6]) -> [f64; 9] {
 /// Systems solved side by side by [`RowFitter::full_window_fits`].
 const LANES: usize = 4;
 
+/// The largest window (taps) whose sums [`RowFitter::lane_sums`] takes side by side (its no-data mask is a `u64`).
+const MAX_LANE_TAPS: usize = 64;
+
+/// The sums of [`RowFitter::lane_sums`]: per lane the count of valid taps, the right-hand sides `Σ b·(z − zc)`
+/// and the bit mask of the no-data taps.
+struct LaneSums {
+    count: [u32; LANES],
+    rhs: [[f64; LANES]; 6],
+    missing: [u64; LANES],
+}
+
+impl LaneSums {
+    /// Lane `l`'s `(count, rhs, packed normal matrix)`, as [`RowFitter::normal_sums`] gives them for a full window:
+    /// the full window's normal matrix minus the no-data taps' terms, added in tap order.
+    #[inline(always)]
+    fn lane(&self, l: usize, outer: &[[f64; 21]], full: &[f64; 21]) -> (usize, [f64; 6], [f64; 21]) {
+        let mut acc = [0.0f64; 21];
+        let mut m = self.missing[l];
+        while m != 0 {
+            let o = &outer[m.trailing_zeros() as usize];
+            for i in 0..21 {
+                acc[i] += o[i];
+            }
+            m &= m - 1;
+        }
+        let packed = std::array::from_fn(|i| full[i] - acc[i]);
+        (self.count[l] as usize, self.rhs.map(|r| r[l]), packed)
+    }
+}
+
 /// Which code fits the full windows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Path {
@@ -587,8 +617,6 @@ impl<'a> RowFitter<'a> {
     /// by side ([`plane::solve_lanes`], [`cholesky_solve_lanes`]; bit-identical to one at a time). A window without
     /// no-data (a fast-path moment overflowed) gets its full-window kernels, as in `general_fit`.
     fn full_window_fits(&mut self, xs: &[usize], y: usize, plane: &mut [[f32; 3]], deriv: &mut DerivRow) {
-        let (wu, r) = (self.wu, self.r as i64);
-        let full = [-r, r, -r, r];
         if self.fit != Fit::Quadratic {
             for &x in xs {
                 let f = self.general_fit(x, y);
@@ -596,6 +624,23 @@ impl<'a> RowFitter<'a> {
             }
             return;
         }
+        isa::dispatch(
+            #[inline(always)]
+            || self.full_window_fits_kernel(xs, y, plane, deriv),
+        );
+    }
+
+    /// [`Self::full_window_fits`] of the quadratic mode, compiled for each instruction set ([`isa::dispatch`]).
+    #[inline(always)]
+    fn full_window_fits_kernel(
+        &mut self,
+        xs: &[usize],
+        y: usize,
+        plane: &mut [[f32; 3]],
+        deriv: &mut DerivRow,
+    ) {
+        let (wu, r) = (self.wu, self.r as i64);
+        let full = [-r, r, -r, r];
         // Lanes without a system (past `xs`, or fitted otherwise) hold the identity.
         let mut n = [[[0.0f64; LANES]; 6]; 6];
         for (i, row) in n.iter_mut().enumerate() {
@@ -606,9 +651,13 @@ impl<'a> RowFitter<'a> {
         let mut sums = [[0.0f64; LANES]; 9];
         let mut lanes = [None; LANES];
         let n_taps = ((2 * r + 1) * (2 * r + 1)) as usize;
+        let side_by_side = (n_taps <= MAX_LANE_TAPS && !xs.is_empty()).then(|| self.lane_sums(xs, y));
         for (l, &x) in xs.iter().enumerate() {
             let zc = f64::from(self.src[y * wu + x]);
-            let (count, rl, packed) = self.normal_sums::<6, 21>(x, y, zc, full);
+            let (count, rl, packed) = match &side_by_side {
+                Some(s) => s.lane(l, &self.outer, &self.outer_full),
+                None => self.normal_sums::<6, 21>(x, y, zc, full),
+            };
             if count == n_taps
                 && r <= MAX_SHAPE_R
                 && let Some(f) = self.shape_fit(x, y, zc, full)
@@ -638,6 +687,45 @@ impl<'a> RowFitter<'a> {
                 f.store(self.fit, x, plane, deriv);
             }
         }
+    }
+
+    /// The right-hand sides and counts of [`Self::normal_sums`] for the full windows (inside the image) of up to
+    /// [`LANES`] pixels `xs` of row `y` (lanes past `xs` repeat its first pixel), side by side and without
+    /// branches, and per lane the bit mask of its window's no-data taps (`win² ≤` [`MAX_LANE_TAPS`]). Each lane adds
+    /// the same products in the same tap order as `normal_sums`; a no-data tap adds `b·0 = ±0`, which leaves the
+    /// sum as it is (a sum that starts at +0 is never −0, and `s + (±0) = s` for every other `s`).
+    #[inline(always)]
+    fn lane_sums(&self, xs: &[usize], y: usize) -> LaneSums {
+        let (wu, r) = (self.wu, self.r);
+        let win = 2 * r + 1;
+        let at = |l: usize| xs[if l < xs.len() { l } else { 0 }];
+        let zc: [f64; LANES] = std::array::from_fn(|l| f64::from(self.src[y * wu + at(l)]));
+        // Each lane's window, from its top-left tap to its bottom-right tap.
+        let span = (win - 1) * wu + win;
+        let wins: [&[f32]; LANES] = std::array::from_fn(|l| &self.src[(y - r) * wu + at(l) - r..][..span]);
+        let mut rhs = [[0.0f64; LANES]; 6];
+        let mut count = [0u32; LANES];
+        let mut missing = [0u64; LANES];
+        for v in 0..win {
+            for u in 0..win {
+                let t = v * win + u;
+                let b = &self.bas[t];
+                let mut z = [0.0f64; LANES];
+                for l in 0..LANES {
+                    let z32 = wins[l][v * wu + u];
+                    let fin = z32.is_finite();
+                    z[l] = if fin { f64::from(z32) - zc[l] } else { 0.0 };
+                    count[l] += u32::from(fin);
+                    missing[l] |= u64::from(!fin) << t;
+                }
+                for i in 0..6 {
+                    for l in 0..LANES {
+                        rhs[i][l] += b[i] * z[l];
+                    }
+                }
+            }
+        }
+        LaneSums { count, rhs, missing }
     }
 
     /// The sums of the general fit over the valid pixels of the clipped window `[ulo, uhi] × [vlo, vhi]` around
@@ -931,4 +1019,57 @@ fn symmetric_taps<const R: usize, const W: usize>(
         a0 += e;
     }
     (a1, ap, a0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng, rngs::Xoshiro256PlusPlus};
+
+    #[test]
+    fn lane_sums_equal_normal_sums_bit_for_bit() {
+        // Random depths (integers, fractions, −0, ±∞ and NaN holes) and every window the lanes take: each lane's
+        // count, right-hand sides and normal matrix equal `normal_sums` of its pixel alone, whatever the others.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(18);
+        for trial in 0..60 {
+            let (wu, hu) = (rng.random_range(7..40), rng.random_range(7..30));
+            let holes = [0.02, 0.2, 0.6][trial % 3];
+            let src: Vec<f32> = (0..wu * hu)
+                .map(|_| {
+                    if rng.random_bool(holes) {
+                        [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][rng.random_range(0..3)]
+                    } else if rng.random_bool(0.05) {
+                        -0.0
+                    } else if trial % 2 == 0 {
+                        rng.random_range(-50..50) as f32
+                    } else {
+                        rng.random_range(-3.0..3.0f32) * 10f32.powi(rng.random_range(-3..4))
+                    }
+                })
+                .collect();
+            for window in [3u32, 5, 7] {
+                let r = window as usize / 2;
+                if wu <= 2 * r || hu <= 2 * r {
+                    continue;
+                }
+                let f = RowFitter::new(&src, wu, hu, window, Path::Fast, Fit::Quadratic);
+                let ri = r as i64;
+                for y in r..hu - r {
+                    let xs: Vec<usize> = (r..wu - r).filter(|_| rng.random_bool(0.5)).collect();
+                    for group in xs.chunks(rng.random_range(1..=LANES)) {
+                        let s = f.lane_sums(group, y);
+                        for (l, &x) in group.iter().enumerate() {
+                            let zc = f64::from(src[y * wu + x]);
+                            let (count, rhs, packed) = s.lane(l, &f.outer, &f.outer_full);
+                            let (c0, r0, p0) = f.normal_sums::<6, 21>(x, y, zc, [-ri, ri, -ri, ri]);
+                            let at = format!("trial {trial}, window {window}, ({x}, {y})");
+                            assert_eq!(count, c0, "{at}");
+                            assert_eq!(rhs.map(f64::to_bits), r0.map(f64::to_bits), "{at}");
+                            assert_eq!(packed.map(f64::to_bits), p0.map(f64::to_bits), "{at}");
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -35,8 +35,9 @@ pub(crate) fn solve(s: &[f64; 9]) -> Option<[f64; 3]> {
 
 /// [`solve`] of `L` independent systems at once, one per lane (`s[sum][lane]`): each lane's arithmetic is the
 /// single system's, in the same order, so its result is bit-identical to solving it alone; the lanes run side by
-/// side (their divisions overlap).
-#[inline]
+/// side (their divisions overlap). Inlined, so it is compiled for each instruction set where a dispatched loop calls
+/// it.
+#[inline(always)]
 pub(crate) fn solve_lanes<const L: usize>(s: &[[f64; L]; 9]) -> [Option<[f64; 3]>; L] {
     let mut out = [None; L];
     for l in 0..L {

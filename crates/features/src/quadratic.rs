@@ -69,7 +69,9 @@ pub(crate) fn cholesky_solve(n: &mut [[f64; 6]; 6], rhs: &mut [f64; 6]) -> bool 
 /// [`cholesky_solve`] of `L` independent systems at once, one per lane (`n[i][j][lane]`, `rhs[i][lane]`): each
 /// lane's arithmetic is the single system's, in the same order, so its result is bit-identical to solving it alone;
 /// the lanes run side by side (vector instructions, and the division chains of different systems overlap). A lane
-/// whose system is singular gets `false` and a meaningless solution, without effect on the other lanes.
+/// whose system is singular gets `false` and a meaningless solution, without effect on the other lanes. Inlined, so
+/// it is compiled for each instruction set where a dispatched loop calls it.
+#[inline(always)]
 pub(crate) fn cholesky_solve_lanes<const L: usize>(
     n: &mut [[[f64; L]; 6]; 6],
     rhs: &mut [[f64; L]; 6],

@@ -4,7 +4,9 @@
 //! rotations, the 2 × 2 end case), so the same bits, without the generic views, dynamic sub-ranges and their
 //! bounds checks. A test compares both with nalgebra bit for bit on random matrices.
 //!
-//! The comments name the nalgebra function each step copies. Sums start from `0.0` where nalgebra's do (its
+//! Derived from nalgebra (Apache-2.0, © Sébastien Crozet and the nalgebra contributors): the changes are the
+//! specialisation to 3 × 3 `f64` and the removal of the generic views. The comments name the nalgebra function
+//! each step copies. Sums start from `0.0` where nalgebra's do (its
 //! dot product on dynamically sized views), which matters only for the sign of a zero.
 
 /// `f64::EPSILON`, nalgebra's `default_epsilon`.
