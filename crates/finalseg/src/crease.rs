@@ -8,9 +8,8 @@
 //! it meets first.
 
 use crate::Scene;
-use crate::fill::for_neighbours;
 use crate::plane::Plane;
-use crate::refine::SIGMA_FLOOR;
+use crate::refine::{SIGMA_FLOOR, border_pixels_into, next_candidates};
 use planefit::Moments;
 
 /// A pixel is a crease pixel of the neighbouring region only within this many noise scales of that region's plane
@@ -52,8 +51,8 @@ fn signed(plane: &Plane, p: [f64; 3]) -> f64 {
     plane.normal[0] * p[0] + plane.normal[1] * p[1] + plane.normal[2] * p[2] + plane.offset
 }
 
-/// The crease between regions `a` and `b` (planes and centroids), if their normals are more than `cos_max` apart
-/// (cosine) and each centroid lies on the same side of the other's plane.
+/// The crease between regions `a` and `b` (planes and centroids), if the cosine of the angle between their normals
+/// is at most `cos_max` in magnitude and each centroid lies on the same side of the other's plane.
 fn crease(pa: &Plane, pb: &Plane, ca: [f64; 3], cb: [f64; 3], cos_max: f64) -> Option<Crease> {
     let cos = pa.normal[0] * pb.normal[0] + pa.normal[1] * pb.normal[1] + pa.normal[2] * pb.normal[2];
     if cos.abs() > cos_max {
@@ -72,6 +71,7 @@ fn crease(pa: &Plane, pb: &Plane, ca: [f64; 3], cb: [f64; 3], cos_max: f64) -> O
 /// labels in the order left, right, up, down and moves to the first whose plane it sees (and lies within [`GATE`]
 /// noise scales of). At most `passes` passes, each decided from the labels of the previous one; the planes stay
 /// those given. Returns the number of moves.
+///
 /// With `border_given`, the first pass examines the pixels of [`Buffers::border_mut`] (the border pixels of
 /// `groups` in raster order, as `refine::border_pixels_into` finds them); otherwise it scans for them.
 pub(crate) fn creases(
@@ -97,7 +97,7 @@ pub(crate) fn creases(
     if !border_given {
         cand.clear();
         cand.reserve(w * h);
-        crate::refine::border_pixels_into(groups, w, h, cand);
+        border_pixels_into(groups, w, h, cand);
     }
     moves.clear();
     moves.reserve(w * h);
@@ -114,21 +114,8 @@ pub(crate) fn creases(
             groups[i as usize] = l;
         }
         total += moves.len() as u32;
-        // Next candidates: the moved pixels' labelled neighbours, each once, in raster order.
-        cand.clear();
-        for &(i, _) in moves.iter() {
-            let i = i as usize;
-            for_neighbours(i % w, i / w, w, h, |j, _, _| {
-                if groups[j] != 0 && !seen[j] {
-                    seen[j] = true;
-                    cand.push(j as u32);
-                }
-            });
-        }
-        cand.sort_unstable();
-        for &j in cand.iter() {
-            seen[j as usize] = false;
-        }
+        // Next candidates: the moved pixels' labelled neighbours.
+        next_candidates(moves, groups, (w, h), seen, cand);
     }
     tracing::debug!(moves = total, "crease pixels placed");
     total

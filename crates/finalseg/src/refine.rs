@@ -100,24 +100,36 @@ pub(crate) fn refine(
         moved.extend(moves.iter().map(|&(i, _)| i));
         total += moves.len() as u32;
         // Next candidates: the moved pixels' labelled neighbours (their best plane may have come
-        // next to them), each once, in raster order.
-        cand.clear();
-        for &(i, _) in moves.iter() {
-            let i = i as usize;
-            for_neighbours(i % w, i / w, w, h, |j, _, _| {
-                if groups[j] != 0 && !seen[j] {
-                    seen[j] = true;
-                    cand.push(j as u32);
-                }
-            });
-        }
-        cand.sort_unstable();
-        for &j in cand.iter() {
-            seen[j as usize] = false;
-        }
+        // next to them).
+        next_candidates(moves, groups, (w, h), seen, cand);
     }
     tracing::debug!(moves = total, "refined borders");
     total
+}
+
+/// Into `cand`, the labelled 8-neighbours of the pixels of `moves` in `groups` (rows of `w`), each once, in raster
+/// order; `seen` (all false before and after) marks those already listed.
+pub(crate) fn next_candidates(
+    moves: &[(u32, u32)],
+    groups: &[u32],
+    (w, h): (usize, usize),
+    seen: &mut [bool],
+    cand: &mut Vec<u32>,
+) {
+    cand.clear();
+    for &(i, _) in moves {
+        let i = i as usize;
+        for_neighbours(i % w, i / w, w, h, |j, _, _| {
+            if groups[j] != 0 && !seen[j] {
+                seen[j] = true;
+                cand.push(j as u32);
+            }
+        });
+    }
+    cand.sort_unstable();
+    for &j in cand.iter() {
+        seen[j as usize] = false;
+    }
 }
 
 /// Whether labelled pixel (x, y) of `groups` has an 8-neighbour of another nonzero label (the rule itself).
