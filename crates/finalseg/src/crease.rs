@@ -10,7 +10,7 @@
 use crate::Scene;
 use crate::plane::Plane;
 use crate::refine::{SIGMA_FLOOR, border_pixels_into, next_candidates};
-use planefit::Moments;
+use planefit::{Moments, dot};
 
 /// A pixel is a crease pixel of the neighbouring region only within this many noise scales of that region's plane
 /// (the noise scale: the larger RMS of the two planes, at least [`SIGMA_FLOOR`]); farther, its own depth places it.
@@ -45,20 +45,14 @@ enum Crease {
     Concave,
 }
 
-/// The signed distance of `p` to `plane`: positive on the side of the sensor.
-#[inline]
-fn signed(plane: &Plane, p: [f64; 3]) -> f64 {
-    plane.normal[0] * p[0] + plane.normal[1] * p[1] + plane.normal[2] * p[2] + plane.offset
-}
-
 /// The crease between regions `a` and `b` (planes and centroids), if the cosine of the angle between their normals
 /// is at most `cos_max` in magnitude and each centroid lies on the same side of the other's plane.
 fn crease(pa: &Plane, pb: &Plane, ca: [f64; 3], cb: [f64; 3], cos_max: f64) -> Option<Crease> {
-    let cos = pa.normal[0] * pb.normal[0] + pa.normal[1] * pb.normal[1] + pa.normal[2] * pb.normal[2];
+    let cos = dot(pa.normal, pb.normal);
     if cos.abs() > cos_max {
         return None;
     }
-    match (signed(pb, ca), signed(pa, cb)) {
+    match (pb.signed(ca), pa.signed(cb)) {
         (sa, sb) if sa < 0.0 && sb < 0.0 => Some(Crease::Convex),
         (sa, sb) if sa > 0.0 && sb > 0.0 => Some(Crease::Concave),
         _ => None,
@@ -170,8 +164,8 @@ fn seen_label(
     let d = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
     // Where along the line of sight (in range units from the pixel's point) it meets `plane`.
     let meet = |plane: &Plane| {
-        let along = plane.normal[0] * d[0] + plane.normal[1] * d[1] + plane.normal[2] * d[2];
-        (along.abs() > 1e-12).then(|| -signed(plane, p0) / along)
+        let along = dot(plane.normal, d);
+        (along.abs() > 1e-12).then(|| -plane.signed(p0) / along)
     };
     let ta = meet(pa)?;
     others[first..n]

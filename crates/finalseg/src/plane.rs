@@ -16,9 +16,14 @@ pub(crate) struct Plane {
 }
 
 impl Plane {
+    /// Signed distance of `p` to the plane: positive on the side of the sensor (the normal's side).
+    pub(crate) fn signed(&self, p: [f64; 3]) -> f64 {
+        dot(self.normal, p) + self.offset
+    }
+
     /// Distance of `p` to the plane.
     pub(crate) fn residual(&self, p: [f64; 3]) -> f64 {
-        (self.normal[0] * p[0] + self.normal[1] * p[1] + self.normal[2] * p[2] + self.offset).abs()
+        self.signed(p).abs()
     }
 }
 
@@ -27,7 +32,7 @@ impl Plane {
 pub(crate) fn mean_sq_residual(m: &Moments, plane: &Plane) -> f64 {
     let nv = Vector3::from(plane.normal);
     let c = m.centroid();
-    let along = plane.normal[0] * c[0] + plane.normal[1] * c[1] + plane.normal[2] * c[2] + plane.offset;
+    let along = plane.signed(c);
     ((nv.transpose() * m.covariance() * nv)[0]).max(0.0) + along * along
 }
 
