@@ -130,6 +130,8 @@ impl Config {
         c.segment.fill_max_residual = 0.0;
         c.segment.refine_passes = 0;
         c.segment.crease_passes = 0;
+        c.segment.band_max_angle_deg = 0.0;
+        c.segment.outlier_scales = 0.0;
         c.segment.bend_max_angle_deg = 0.0;
         c
     }
@@ -467,6 +469,18 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.crease_min_angle_deg",
         "Smallest angle between two regions' normals for crease_passes to place the border between them.",
+    ),
+    (
+        "segment.band_max_angle_deg",
+        "After refinement, a connected band of a region lying on an adjacent region's plane moves to it whole if their normals differ ≤ this (0 = off).",
+    ),
+    (
+        "segment.outlier_scales",
+        "A region's pixels beyond this many noise scales (its RMS, at least 0.25) of its plane, in groups, are left unlabelled (0 = off).",
+    ),
+    (
+        "segment.outlier_min_px",
+        "Smallest 4-connected group of such outliers that outlier_scales leaves unlabelled.",
     ),
 ];
 

@@ -91,6 +91,16 @@ pub struct Params {
     pub crease_passes: u32,
     /// Smallest angle between two regions' normals for `crease_passes` to place their common border.
     pub crease_min_angle_deg: f64,
+    /// Largest angle between two adjacent regions' normals for a band of one on the other's plane (a connected part
+    /// nearer that plane than its own, which the two planes' fits over the whole band assign to it) to move whole,
+    /// after the border refinement (0 = off): growth leaked past a shallow crease.
+    pub band_max_angle_deg: f64,
+    /// A region's pixels farther than this many noise scales (its RMS about its plane, at least 0.25 units) from its
+    /// plane, in 4-connected groups of at least `outlier_min_px`, are left unlabelled: a small face seen edge-on that
+    /// no region of its own holds, an object on a wall, the mixed pixels of a jump (0 = off).
+    pub outlier_scales: f64,
+    /// Smallest group of outlier pixels that `outlier_scales` leaves unlabelled (smaller groups are noise and stay).
+    pub outlier_min_px: u32,
 }
 
 impl Default for Params {
@@ -113,6 +123,9 @@ impl Default for Params {
             bend_fit_ratio: 2.0,
             crease_passes: 3,
             crease_min_angle_deg: 20.0,
+            band_max_angle_deg: 45.0,
+            outlier_scales: 2.5,
+            outlier_min_px: 10,
         }
     }
 }
@@ -134,6 +147,11 @@ impl Params {
         ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
         ParamError::at_least("segment.bend_fit_ratio", self.bend_fit_ratio, 0.0)?;
         ParamError::in_range("segment.crease_min_angle_deg", self.crease_min_angle_deg, 0.0, 90.0)?;
+        ParamError::in_range("segment.band_max_angle_deg", self.band_max_angle_deg, 0.0, 90.0)?;
+        ParamError::at_least("segment.outlier_scales", self.outlier_scales, 0.0)?;
+        if self.outlier_min_px == 0 {
+            return Err(ParamError::new("segment.outlier_min_px", "must be ≥ 1"));
+        }
         Ok(())
     }
 }

@@ -228,6 +228,20 @@ fn update_border(
     std::mem::swap(border, out);
 }
 
+/// Into `planes`, `base` refitted by [`refit`] to the labels of `groups` (a label without pixels keeps its plane of
+/// `base`).
+pub(crate) fn refit_from(
+    scene: &Scene<'_>,
+    groups: &[u32],
+    base: &[Plane],
+    planes: &mut Vec<Plane>,
+    (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
+) {
+    planes.clear();
+    planes.extend_from_slice(base);
+    refit(scene, groups, planes, (bufs, row));
+}
+
 /// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
 /// moments summed in raster order; a label without pixels keeps its plane. `row` holds one row of 3D points.
 pub(crate) fn refit(
