@@ -133,6 +133,8 @@ impl Config {
         c.segment.band_max_angle_deg = 0.0;
         c.segment.outlier_scales = 0.0;
         c.segment.bend_max_angle_deg = 0.0;
+        c.segment.within_joint_rms_ratio = 0.0;
+        c.segment.within_close_px = 0;
         c
     }
 
@@ -432,6 +434,14 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.within_max_rms_ratio",
         "Regions mode: such pieces merge only if each one's RMS to the other's plane ≤ this × its own RMS (≥ 1).",
+    ),
+    (
+        "segment.within_joint_rms_ratio",
+        "Regions mode: or if each one's RMS to the plane fitted to both ≤ this × its own RMS and their planes meet between them (0 = off).",
+    ),
+    (
+        "segment.within_close_px",
+        "Regions mode: such pieces within this many pixels across unlabelled valid pixels count as adjacent (0 = off).",
     ),
     (
         "segment.merge_max_angle_deg",

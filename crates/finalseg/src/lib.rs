@@ -45,7 +45,13 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    adjacent pieces of one region-growing region (label ≠ 0) are candidates whatever the
 ///    support, if their planes agree as above and, for a supported border, each piece's RMS
 ///    distance to the other's plane is at most `within_max_rms_ratio` times its own RMS: edges
-///    inside a face split it only where the geometry changes.
+///    inside a face split it only where the geometry changes. With `within_joint_rms_ratio` > 0 such pieces
+///    also merge if the plane fitted to both explains each one's core points within that ratio times its own
+///    RMS and the two planes, halfway between the pieces' centroids, lie within the larger RMS of each other
+///    (a thin piece's own plane strays when extrapolated; parallel faces at two depths stay apart). With
+///    `within_close_px` > 0, two pieces of one region-growing region that come within that many pixels of each
+///    other across valid unlabelled pixels are such candidates too (a thin face seen edge-on that an edge
+///    crosses, whose pieces the fill leaves apart).
 ///    With `bend_max_angle_deg` > 0, two adjacent regions whose border pixels lie, on average,
 ///    closer to each other's plane than `bend_max_gap` times the larger of their RMS residuals
 ///    (the planes meet at the border: a bend, not a step) merge whatever the support, if their

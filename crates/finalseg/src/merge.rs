@@ -90,6 +90,8 @@ struct PlaneTest {
     r2: f64,
     /// `within_max_rms_ratio²`.
     k2: f64,
+    /// `within_joint_rms_ratio²` (0 = off).
+    j2: f64,
     /// cos of `bend_max_angle_deg`, or `None` (bend merges off).
     cos_bend: Option<f64>,
     /// `bend_fit_ratio²`.
@@ -108,17 +110,24 @@ pub(crate) fn merge_unsupported(
     params: &Params,
     bufs: &mut Buffers,
 ) {
-    let Buffers { hor, near, borders, candidates } = bufs;
+    let Buffers { hor, near, borders, candidates, close } = bufs;
     near_edges(edges, scene.w, scene.h, hor, near);
     let bends = params.bend_max_angle_deg > 0.0;
     let room = (scene.w * scene.h) / (params.min_region_px.max(1) as usize) + 1;
     borders.reset(pieces.planes.len(), room);
-    borders_into(scene, &pieces.comp, near, (&pieces.planes, bends), borders);
+    // Pieces of one region-growing region that a gap of unlabelled pixels separates are candidates too.
+    let close = (params.merge_within_region && params.within_close_px > 0).then_some((
+        pieces.guide.as_slice(),
+        params.within_close_px as usize,
+        close,
+    ));
+    borders_into(scene, &pieces.comp, near, (&pieces.planes, bends), close, borders);
     candidates_into(borders, (&pieces.guide, &pieces.planes), params, candidates);
     let test = PlaneTest {
         cos_max: params.merge_max_angle_deg.to_radians().cos(),
         r2: params.merge_max_residual * params.merge_max_residual,
         k2: params.within_max_rms_ratio * params.within_max_rms_ratio,
+        j2: params.within_joint_rms_ratio * params.within_joint_rms_ratio,
         cos_bend: bends.then(|| params.bend_max_angle_deg.to_radians().cos()),
         fit2: params.bend_fit_ratio * params.bend_fit_ratio,
     };
@@ -135,6 +144,17 @@ pub(crate) struct Buffers {
     /// The borders between adjacent components.
     borders: Borders,
     candidates: Candidates,
+    /// The working memory of [`close_pairs_into`].
+    close: Close,
+}
+
+/// The working memory of [`close_pairs_into`], kept between frames.
+#[derive(Debug, Default)]
+struct Close {
+    /// (region-growing label, label) of every component with a region-growing label.
+    by_guide: Vec<(u32, u32)>,
+    /// Per label (index 0: no label): whether its region-growing region holds another component.
+    multi: Vec<bool>,
 }
 
 /// Into `near`, the pixels within 1 px (8-neighbourhood) of an edge pixel: a horizontal 3-wide OR
@@ -168,12 +188,14 @@ fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &m
 
 /// Into `out` (reset for the labels of `comp`), the borders between adjacent components of `comp`, with their
 /// support by `near` and, with `gaps`, their gaps to the components' `planes` (`planes[l − 1]` for label `l`);
-/// the pairs sorted at the end.
+/// with `close` (the region-growing label of each component), also the pairs of [`close_pairs_into`]; the pairs
+/// sorted at the end.
 fn borders_into(
     scene: &Scene<'_>,
     comp: &[u32],
     near: &[bool],
     (planes, gaps): (&[Plane], bool),
+    close: Option<(&[u32], usize, &mut Close)>,
     out: &mut Borders,
 ) {
     let (w, h) = (scene.w, scene.h);
@@ -228,7 +250,68 @@ fn borders_into(
             scan(row, 0..w, (0, w));
         }
     }
+    if let Some((guide, r, bufs)) = close {
+        close_pairs_into((comp, scene.range), guide, (w, h, r), bufs, out);
+    }
     out.entries.sort_unstable_by_key(|e| e.0);
+}
+
+/// Adds to `out` (with empty borders) the pairs of components of one region-growing region (`guide[l − 1]`, ≠ 0)
+/// that come within `r` px (Chebyshev) of each other, seen from a pixel beside a valid unlabelled pixel (`range`
+/// finite, label 0): a thin face seen edge-on that an edge crosses falls into pieces that the fill leaves apart.
+/// Only components that share their region-growing region with another look around.
+fn close_pairs_into(
+    (comp, range): (&[u32], &[f32]),
+    guide: &[u32],
+    (w, h, r): (usize, usize, usize),
+    bufs: &mut Close,
+    out: &mut Borders,
+) {
+    // The components whose region-growing region holds another component.
+    let Close { by_guide, multi } = bufs;
+    by_guide.clear();
+    by_guide.extend(guide.iter().enumerate().filter(|&(_, &g)| g != 0).map(|(k, &g)| (g, k as u32 + 1)));
+    by_guide.sort_unstable();
+    multi.clear();
+    multi.resize(guide.len() + 1, false);
+    for run in by_guide.chunk_by(|p, q| p.0 == q.0).filter(|run| run.len() > 1) {
+        for &(_, l) in run {
+            multi[l as usize] = true;
+        }
+    }
+    let gap = |i: usize| comp[i] == 0 && range[i].is_finite();
+    // The pair of the previous find and whether it is recorded: a window finds the same pair many times.
+    let mut last = (0u32, 0u32);
+    for y in 0..h {
+        let rows = y.saturating_sub(r)..(y + r + 1).min(h);
+        for x in 0..w {
+            let i = y * w + x;
+            let a = comp[i];
+            if !multi[a as usize] {
+                continue;
+            }
+            let beside = (x > 0 && gap(i - 1))
+                || (x + 1 < w && gap(i + 1))
+                || (y > 0 && gap(i - w))
+                || (y + 1 < h && gap(i + w));
+            if !beside {
+                continue;
+            }
+            let g = guide[a as usize - 1];
+            let cols = x.saturating_sub(r)..(x + r + 1).min(w);
+            for ny in rows.clone() {
+                for &b in &comp[ny * w + cols.start..ny * w + cols.end] {
+                    if b != a && multi[b as usize] && guide[b as usize - 1] == g {
+                        let key = (a.min(b), a.max(b));
+                        if key != last {
+                            out.index(key);
+                            last = key;
+                        }
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
@@ -282,7 +365,9 @@ fn merge_fixpoint(
             let (ia, ib) = (ra as usize - 1, rb as usize - 1);
             let (pa, pb) = (planes[ia], planes[ib]);
             let kind = candidates.kinds[k];
-            let agree = kind.agree.is_some_and(|weak| test.agree(&pa, &pb, &moments[ia], &moments[ib], weak));
+            let agree = kind
+                .agree
+                .is_some_and(|weak| test.agree(&pa, &pb, (&moments[ia], &moments[ib]), weak, scene));
             let bend = || kind.bend && test.bend(&pa, &pb, &moments[ia], &moments[ib], scene);
             if !(agree || bend()) {
                 continue;
@@ -304,7 +389,14 @@ fn merge_fixpoint(
 impl PlaneTest {
     /// Whether groups a and b (planes `pa`, `pb`, moments `ma`, `mb`) may merge over a border that
     /// is `weak`ly supported or not.
-    fn agree(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, weak: bool) -> bool {
+    fn agree(
+        &self,
+        pa: &Plane,
+        pb: &Plane,
+        (ma, mb): (&Moments, &Moments),
+        weak: bool,
+        scene: &Scene<'_>,
+    ) -> bool {
         let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
         let (ea, eb) = (mean_sq_residual(ma, pb), mean_sq_residual(mb, pa));
         if dot.abs() < self.cos_max || ea > self.r2 || eb > self.r2 {
@@ -313,7 +405,25 @@ impl PlaneTest {
         // Within one region-growing region over a supported border: merge only pieces that lie on
         // one plane within their own noise. (+1e-12: noise-free pieces of one plane have RMS 0 and
         // rounding-level residuals.)
-        weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12)
+        if weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12) {
+            return true;
+        }
+        // Or one plane through both explains each nearly as well as its own: a thin piece's plane, extrapolated
+        // to the other piece, strays by its tilt error.
+        if self.j2 == 0.0 {
+            return false;
+        }
+        // And the two planes meet between the pieces: halfway between their centroids they lie within the
+        // larger RMS of each other (parallel faces at two depths do not; a joint plane can tilt across a step).
+        let (ca, cb) = (ma.centroid(), mb.centroid());
+        let mid = [0.5 * (ca[0] + cb[0]), 0.5 * (ca[1] + cb[1]), 0.5 * (ca[2] + cb[2])];
+        let apart = (pa.signed(mid) - dot.signum() * pb.signed(mid)).abs();
+        if apart > pa.rms.max(pb.rms) {
+            return false;
+        }
+        let pj = fit_plane(&ma.combined(mb), scene.camera);
+        mean_sq_residual(ma, &pj) <= self.j2 * pa.rms * pa.rms + 1e-12
+            && mean_sq_residual(mb, &pj) <= self.j2 * pb.rms * pb.rms + 1e-12
     }
 
     /// Whether groups a and b, whose border is continuous, may merge as two sides of a bend: one
@@ -431,7 +541,7 @@ mod tests {
             let scene = Scene { range: &range, w, h, camera: &rangeimage::Camera::Grid };
             for gaps in [false, true] {
                 table.reset(n as usize, 4);
-                borders_into(&scene, &comp, &near, (&planes, gaps), &mut table);
+                borders_into(&scene, &comp, &near, (&planes, gaps), None, &mut table);
                 let got = format!(
                     "{:?}",
                     table.entries.iter().map(|(k, b)| (*k, b.n, b.near, b.gap.to_bits())).collect::<Vec<_>>()
@@ -440,5 +550,74 @@ mod tests {
                 assert_eq!(got, borders_by_map(&scene, &comp, &near, &planes, gaps), "case {case}");
             }
         }
+    }
+
+    /// Two pieces of one region-growing region that a gap of one unlabelled pixel separates become a candidate pair
+    /// (with an empty border) within 2 px, pieces of two regions or farther apart do not, and 4-adjacent pairs keep
+    /// their borders.
+    #[test]
+    fn close_pieces_of_one_region_become_candidates() {
+        // 1 1 0 2 2 | 3 (a different guide) … ; row 2: 4 far away.
+        let (w, h) = (8usize, 2usize);
+        #[rustfmt::skip]
+        let comp: Vec<u32> = vec![
+            1, 1, 0, 2, 2, 3, 0, 0,
+            1, 1, 0, 2, 2, 0, 0, 4,
+        ];
+        let guide = [9, 9, 8, 9];
+        let range = vec![100.0f32; w * h];
+        let scene = Scene { range: &range, w, h, camera: &rangeimage::Camera::Grid };
+        let planes = vec![Plane { normal: [0.0, 0.0, 1.0], offset: -100.0, rms: 0.1 }; 4];
+        let near = vec![false; w * h];
+        let mut table = Borders::default();
+        table.reset(4, 4);
+        let mut close = Close::default();
+        borders_into(&scene, &comp, &near, (&planes, false), Some((&guide, 2, &mut close)), &mut table);
+        let pairs: Vec<_> = table.entries.iter().map(|(k, b)| (*k, b.n)).collect();
+        // (1, 2): close, same guide, no border; (2, 3): 4-adjacent (its border); (2, 4): 3 px apart; (3, 4): two guides.
+        assert_eq!(pairs, vec![((1, 2), 0), ((2, 3), 2)]);
+        // Within 1 px only, or off: only the 4-adjacent pair.
+        table.reset(4, 4);
+        borders_into(&scene, &comp, &near, (&planes, false), Some((&guide, 1, &mut close)), &mut table);
+        assert_eq!(table.entries.iter().map(|(k, b)| (*k, b.n)).collect::<Vec<_>>(), vec![((2, 3), 2)]);
+        table.reset(4, 4);
+        borders_into(&scene, &comp, &near, (&planes, false), None, &mut table);
+        assert_eq!(table.entries.iter().map(|(k, b)| (*k, b.n)).collect::<Vec<_>>(), vec![((2, 3), 2)]);
+    }
+
+    /// The joint-plane test merges two pieces of one tilted plane whose own planes are too poorly determined for
+    /// the cross test, and keeps a step between parallel faces.
+    #[test]
+    fn joint_plane_test_merges_coplanar_pieces_but_not_a_step() {
+        let range = vec![0.0f32; 1];
+        let scene = Scene { range: &range, w: 1, h: 1, camera: &rangeimage::Camera::Grid };
+        // Two thin strips (3 px wide, 30 long) of z = 0.5 x + noise, the second 30 px farther along.
+        let strip = |x0: f64, dz: f64| {
+            let mut m = Moments::default();
+            for x in 0..30 {
+                for y in 0..3 {
+                    let noise = [0.3, -0.3, 0.0, 0.25, -0.25][(x * 3 + y * 2) % 5];
+                    let xf = x0 + f64::from(x as u32);
+                    m.add([xf, f64::from(y as u32), 0.5 * xf + noise + dz]);
+                }
+            }
+            m
+        };
+        let test = |ratio: f64, dz: f64| {
+            let (ma, mb) = (strip(0.0, 0.0), strip(30.0, dz));
+            let (pa, pb) = (fit_plane(&ma, scene.camera), fit_plane(&mb, scene.camera));
+            let t = PlaneTest {
+                cos_max: 10f64.to_radians().cos(),
+                r2: 9.0,
+                k2: 1.0,
+                j2: ratio * ratio,
+                cos_bend: None,
+                fit2: 0.0,
+            };
+            t.agree(&pa, &pb, (&ma, &mb), false, &scene)
+        };
+        assert!(!test(0.0, 0.0), "the cross test alone (ratio 1) refuses");
+        assert!(test(1.1, 0.0), "one plane explains both");
+        assert!(!test(1.1, 1.0), "a step of about five times the noise stays");
     }
 }

@@ -48,6 +48,14 @@ pub struct Params {
     /// plane is at most this multiple of its RMS distance to its own plane (they lie on one plane
     /// within noise; a small step between parallel faces is a real border). ≥ 1.
     pub within_max_rms_ratio: f64,
+    /// `regions` mode, `merge_within_region`: such pieces also merge if the plane fitted to both explains each
+    /// one's core points within this multiple of its own RMS and their planes lie within the larger RMS of each
+    /// other halfway between the pieces' centroids (0 = off).
+    pub within_joint_rms_ratio: f64,
+    /// `regions` mode, `merge_within_region`: two pieces of one region-growing region that come within this many
+    /// pixels (Chebyshev) of each other across valid unlabelled pixels are merge candidates too, as if adjacent
+    /// (0 = off): a thin face seen edge-on that an edge crosses, whose pieces the fill leaves apart.
+    pub within_close_px: u32,
     /// `regions` mode: largest angle between the two regions' 3D plane normals for a merge.
     pub merge_max_angle_deg: f64,
     /// `regions` mode: largest RMS distance of each region's core points to the other region's
@@ -113,6 +121,8 @@ impl Default for Params {
             min_border_support: 0.3,
             merge_within_region: true,
             within_max_rms_ratio: 1.5,
+            within_joint_rms_ratio: 1.1,
+            within_close_px: 8,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 3.0,
             fill_max_residual: 2.0,
@@ -139,6 +149,8 @@ impl Params {
         ParamError::in_range("segment.gap_close_px", self.gap_close_px, 0.0, 64.0)?;
         ParamError::in_range("segment.min_border_support", self.min_border_support, 0.0, 1.0)?;
         ParamError::at_least("segment.within_max_rms_ratio", self.within_max_rms_ratio, 1.0)?;
+        ParamError::at_least("segment.within_joint_rms_ratio", self.within_joint_rms_ratio, 0.0)?;
+        ParamError::in_range("segment.within_close_px", self.within_close_px, 0, 64)?;
         ParamError::in_range("segment.merge_max_angle_deg", self.merge_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.fill_max_residual", self.fill_max_residual, 0.0)?;
         ParamError::at_least("segment.fill_rms_ratio", self.fill_rms_ratio, 0.0)?;
