@@ -280,7 +280,7 @@ fn close_pairs_into(
         }
     }
     let gap = |i: usize| comp[i] == 0 && range[i].is_finite();
-    // The pair of the previous find and whether it is recorded: a window finds the same pair many times.
+    // The pair found last (already in `out`): a window finds the same pair many times, so it is looked up once.
     let mut last = (0u32, 0u32);
     for y in 0..h {
         let rows = y.saturating_sub(r)..(y + r + 1).min(h);
