@@ -14,9 +14,9 @@
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
 //! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
 //! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
-//! ([`planefit::noise::smallest_step`]; the step test runs only when σ is below that): noise-free quantised
-//! depth (rendered, or a sensor that smooths before it rounds) reads σ ≈ 0 where most windows lie within one
-//! step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
+//! ([`planefit::noise::is_step`], else [`planefit::noise::near_uniform_step`]; the step test runs only when σ
+//! is below that): noise-free quantised depth (rendered, or a sensor that smooths before it rounds) reads
+//! σ ≈ 0 where most windows lie within one step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
 
 use rangeimage::{Camera, RangeImage};
 
@@ -79,11 +79,13 @@ pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec
     // window leaves ~1e-11): its rounding error is still that of its step, q / √12.
     // The step test runs only when it matters: σ below the rounding error of the smallest difference.
     let rounding = match planefit::noise::smallest_difference(range, SAMPLE_STRIDE) {
-        Some(q)
-            if sigma < q * depth_scale / 12f64.sqrt()
-                && planefit::noise::is_step(range, SAMPLE_STRIDE, q) =>
-        {
-            q * depth_scale / 12f64.sqrt()
+        Some(q) if sigma < q * depth_scale / 12f64.sqrt() => {
+            let step = if planefit::noise::is_step(range, SAMPLE_STRIDE, q) {
+                Some(q)
+            } else {
+                planefit::noise::near_uniform_step(range, SAMPLE_STRIDE, q)
+            };
+            step.map_or(0.0, |q| q * depth_scale / 12f64.sqrt())
         }
         _ => 0.0,
     };
@@ -201,5 +203,19 @@ mod tests {
         let flat = Grid::new(64, 48, 2.0f32);
         assert_eq!(working_units(&flat, &cam).factor, 0.25);
         assert!(working_units(&Grid::new(3, 3, 2.0f32), &PIN).is_identity());
+    }
+
+    #[test]
+    fn noise_free_steps_count_their_rounding_error_even_when_uneven() {
+        // A gentle slope rounded to 3.8 and stored in whole units: wide terraces (σ of the windows ≈ 0), risers
+        // of 4 and 3. σ is at least the highest riser's rounding error, 4 / √12 ≈ 1.15, above the grid band.
+        let img: RangeImage = Grid::from_fn(200, 150, |x, y| {
+            let v = 60.0 + 0.05 * f64::from(x) + 0.1 * f64::from(y);
+            ((v / 3.8).round() * 3.8).round() as f32
+        });
+        assert!(planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE) < 0.1);
+        assert_eq!(planefit::noise::smallest_step(&img, SAMPLE_STRIDE), None, "no uniform step");
+        let u = working_units(&img, &Camera::Grid);
+        assert!((u.factor - GRID_SIGMA_BAND.1 / (4.0 / 12f64.sqrt())).abs() < 1e-12, "{u:?}");
     }
 }

@@ -11,7 +11,9 @@
 //! σ is the noise a local plane fit sees: noise correlated over more than a few pixels (scanner
 //! stripes) is partly absorbed by the 5 × 5 planes and counts only in part.
 //! The quantisation step is the smallest nonzero difference between 4-neighbours that is common
-//! and of which nearly every nonzero difference is a whole multiple (`None` for continuous depth).
+//! and of which nearly every nonzero difference is a whole multiple, or the highest riser of nearly
+//! uniform steps (terraces whose risers differ by a storage unit; [`near_uniform_step`]); `None`
+//! for continuous depth.
 //!
 //! σ includes the quantisation's share (the rounding error, `q²/12` in variance when the noise is
 //! not much smaller than a step); [`NoiseEstimate::sigma_noise`] removes it.
@@ -33,6 +35,12 @@ const STEP_MIN_SHARE: f64 = 0.02;
 const STEP_MULTIPLE_SHARE: f64 = 0.9;
 /// Relative tolerance of "equal" and "whole multiple" (depths stored as scaled integers in `f32`).
 const STEP_REL_TOL: f64 = 1e-3;
+/// Nearly uniform steps ([`near_uniform_step`]): at least this fraction of the finite neighbour differences are
+/// exactly 0 (the terraces of a staircase; continuous depth has next to none).
+const NEAR_STEP_MIN_ZERO_SHARE: f64 = 0.25;
+/// Nearly uniform steps: at least this fraction of the nonzero differences lie within one step, from the
+/// smallest nonzero difference `d` up to (not including) `2d`.
+const NEAR_STEP_MIN_SHARE: f64 = 0.5;
 
 /// What [`estimate`] measured on one image.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,7 +49,8 @@ pub struct NoiseEstimate {
     /// quantisation included (NaN when fewer than 20 full 5 × 5 windows hold data).
     pub sigma: f64,
     /// The quantisation step of depth (smallest common nonzero neighbour difference of which the
-    /// others are multiples), `None` if depths look continuous.
+    /// others are multiples, else the highest riser of nearly uniform steps: [`near_uniform_step`]), `None` if
+    /// depths look continuous.
     pub step: Option<f64>,
     /// Number of full 5 × 5 windows σ comes from.
     pub windows: usize,
@@ -68,7 +77,8 @@ impl NoiseEstimate {
 pub fn estimate(range: &rangeimage::RangeImage) -> NoiseEstimate {
     let _s = tracing::debug_span!("noise_estimate").entered();
     let (sigma, windows) = sigma_of_windows(range, 1, &mut Vec::new());
-    let step = quantisation_step(range);
+    let step = quantisation_step(range)
+        .or_else(|| smallest_difference(range, 1).and_then(|d| near_uniform_step(range, 1, d)));
     tracing::debug!(sigma, ?step, windows, "noise estimate");
     NoiseEstimate { sigma, step, windows }
 }
@@ -157,6 +167,45 @@ fn is_multiple(d: f64, step: f64) -> bool {
 #[must_use]
 pub fn smallest_step(range: &rangeimage::RangeImage, stride: usize) -> Option<f64> {
     smallest_difference(range, stride).filter(|&d| is_step(range, stride, d))
+}
+
+/// The step of depth rounded to steps that are nearly but not exactly uniform, read from every `stride`-th row
+/// (and the row below it), given `smallest`, the smallest nonzero difference between neighbours there: the largest
+/// of the nonzero differences in `[smallest, 2 · smallest)` (the highest riser) when at least a quarter of all finite differences are
+/// exactly 0 (terraces) and at least half of the nonzero ones lie in that range (one step); `None` otherwise.
+///
+/// A step that is not a whole number of the storage unit gives two neighbouring differences (3.99 grey levels
+/// stored in whole grey levels: 4 and, where the rounding drifts, 3), and 4 is not a whole multiple of the
+/// smallest difference, as [`is_step`] asks.
+/// Continuous depth has next to no zero differences. One pass over `1 / stride` of the image; callers try
+/// [`is_step`] first.
+///
+/// # Panics
+/// If `stride` is 0.
+#[must_use]
+pub fn near_uniform_step(range: &rangeimage::RangeImage, stride: usize, smallest: f64) -> Option<f64> {
+    assert!(stride > 0, "stride must be positive");
+    let (mut finite, mut zero, mut nonzero, mut in_step, mut largest) =
+        (0usize, 0usize, 0usize, 0usize, 0.0f64);
+    for_each_difference(range, stride, |d| {
+        if d.is_finite() {
+            finite += 1;
+            if d == 0.0 {
+                zero += 1;
+            } else {
+                nonzero += 1;
+                if d >= smallest && d < 2.0 * smallest {
+                    in_step += 1;
+                    largest = largest.max(d);
+                }
+            }
+        }
+    });
+    (smallest > 0.0
+        && nonzero >= 100
+        && zero as f64 >= NEAR_STEP_MIN_ZERO_SHARE * finite as f64
+        && in_step as f64 >= NEAR_STEP_MIN_SHARE * nonzero as f64)
+        .then_some(largest)
 }
 
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
@@ -442,6 +491,39 @@ mod tests {
         }
         assert_eq!(smallest_step(&Grid::new(40, 30, 4.0f32), 1), None, "constant depth");
         assert_eq!(smallest_step(&Grid::new(40, 30, f32::NAN), 1), None, "no data");
+    }
+
+    #[test]
+    fn nearly_uniform_steps_give_their_highest_riser() {
+        // Rounded to 3.8 and stored in whole units: risers of 4 and, every fifth, 3.
+        let stored = |sigma: f64, seed: u64| -> RangeImage {
+            let img = scene(sigma, Some(3.8), seed);
+            Grid::from_fn(img.width(), img.height(), |x, y| img[(x, y)].round())
+        };
+        for (sigma, seed) in [(0.0, 12), (0.25, 13)] {
+            let img = stored(sigma, seed);
+            let smallest = smallest_difference(&img, 4).expect("differences");
+            assert_eq!(smallest, 3.0, "σ {sigma}");
+            assert_eq!(smallest_step(&img, 4), None, "σ {sigma}: 4 is no multiple of 3");
+            assert_eq!(near_uniform_step(&img, 4, smallest), Some(4.0), "σ {sigma}");
+            assert_eq!(estimate(&img).step, Some(4.0), "σ {sigma}");
+        }
+        // Continuous depth, noisy or steep and smooth: next to no zero differences, no step.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(14);
+        let steep: RangeImage =
+            Grid::from_fn(40, 30, |x, y| (3.0 * x as f64 + 0.7 * y as f64 + 0.001 * gauss(&mut rng)) as f32);
+        for (name, img) in
+            [("σ 0.1", scene(0.1, None, 15)), ("σ 0.5", scene(0.5, None, 16)), ("steep", steep)]
+        {
+            let smallest = smallest_difference(&img, 1).expect("differences");
+            assert_eq!(near_uniform_step(&img, 1, smallest), None, "{name}");
+            assert_eq!(estimate(&img).step, None, "{name}");
+        }
+        // A frontal plane whose few nonzero differences are jumps of many sizes: terraces, but no common riser.
+        let blocks: RangeImage =
+            Grid::from_fn(60, 40, |x, y| (10 + 7 * (x / 10) * (x / 10) + 3 * (y / 20)) as f32);
+        let smallest = smallest_difference(&blocks, 1).expect("differences");
+        assert_eq!(near_uniform_step(&blocks, 1, smallest), None);
     }
 
     /// Unit-variance Gaussian (Irwin–Hall sum of 12 uniforms).

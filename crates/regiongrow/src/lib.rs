@@ -98,9 +98,9 @@ pub struct Params {
     pub max_angle_deg: f32,
     /// Default mode: maximum distance of a pixel's 3D point to the region's plane, in camera units.
     pub max_residual: f32,
-    /// Default mode, on depth quantised in uniform steps (`planefit::noise::smallest_step`): the normal-angle
-    /// limit is at least the tilt of this many steps per pixel and the residual limit at least one step, both in
-    /// 3D at the image centre and its mean depth (0 = off). A slanted plane in coarse steps is a staircase of
+    /// Default mode, on depth quantised in steps (`planefit::noise::is_step`, else `near_uniform_step`: the
+    /// highest riser): the normal-angle limit is at least the tilt of this many steps per pixel and the residual
+    /// limit at least one step, both in 3D at the image centre and its mean depth (0 = off). A slanted plane in coarse steps is a staircase of
     /// flat terraces; 0.3 is the slope a 5 × 5 plane fit finds across a single step, so the normals of windows on
     /// a step edge stay within the limit and the next terrace within the residual.
     pub step_tilt: f32,
@@ -203,7 +203,8 @@ impl Params {
     }
 
     /// These parameters with the normal-angle and residual limits raised for the depth steps of `range` (see
-    /// `step_tilt`); unchanged if the depth has no uniform step or `step_tilt` is 0.
+    /// `step_tilt`); unchanged if the depth has no step (`planefit::noise::is_step`, else `near_uniform_step`)
+    /// or `step_tilt` is 0.
     #[must_use]
     pub fn for_steps(&self, range: &RangeImage, camera: &Camera) -> Params {
         let mut p = self.clone();
@@ -225,22 +226,37 @@ impl Params {
             return p;
         }
         let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n));
-        let (Some(p0), Some(right), Some(deeper)) =
-            (camera.point(x, y, v), camera.point(x + 1.0, y, v), camera.point(x, y, v + step))
-        else {
-            return p;
+        // The step in 3D at the image centre and the tilt of `step_tilt` steps per pixel there.
+        let limits = |step: f64| {
+            let (p0, right, deeper) =
+                (camera.point(x, y, v)?, camera.point(x + 1.0, y, v)?, camera.point(x, y, v + step)?);
+            let dist = |a: [f64; 3]| {
+                ((a[0] - p0[0]).powi(2) + (a[1] - p0[1]).powi(2) + (a[2] - p0[2]).powi(2)).sqrt()
+            };
+            let (step_3d, pitch) = (dist(deeper), dist(right));
+            (step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()).then(|| {
+                let tilt_deg = ((f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees()) as f32;
+                (step_3d, pitch, tilt_deg)
+            })
         };
-        let dist =
-            |a: [f64; 3]| ((a[0] - p0[0]).powi(2) + (a[1] - p0[1]).powi(2) + (a[2] - p0[2]).powi(2)).sqrt();
-        let (step_3d, pitch) = (dist(deeper), dist(right));
-        if !(step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()) {
+        let raises = |(step_3d, _, tilt_deg): (f64, f64, f32)| {
+            tilt_deg > p.max_angle_deg || step_3d as f32 > p.max_residual
+        };
+        let Some(at_smallest) = limits(step) else { return p };
+        // Steps are never smaller than the smallest difference, so nothing to raise there means nothing at all.
+        if !raises(at_smallest) {
             return p;
         }
-        let tilt_deg = ((f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees()) as f32;
-        let raises = tilt_deg > p.max_angle_deg || step_3d as f32 > p.max_residual;
-        if !raises || !planefit::noise::is_step(range, STEP_STRIDE, step) {
-            return p;
-        }
+        let (step, (step_3d, pitch, tilt_deg)) = if planefit::noise::is_step(range, STEP_STRIDE, step) {
+            (step, at_smallest)
+        } else {
+            match planefit::noise::near_uniform_step(range, STEP_STRIDE, step)
+                .and_then(|s| Some((s, limits(s)?)))
+            {
+                Some((s, l)) if raises(l) => (s, l),
+                _ => return p,
+            }
+        };
         tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in uniform steps");
         p.max_angle_deg = p.max_angle_deg.max(tilt_deg);
         p.max_residual = p.max_residual.max(step_3d as f32);

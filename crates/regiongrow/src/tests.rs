@@ -559,6 +559,11 @@ fn depth_in_coarse_steps_raises_the_angle_and_residual_limits() {
         p,
         "nothing else"
     );
+    // Steps of 3.8 stored in whole units (risers of 4 and 3): raised for the highest riser, 4 steps.
+    let uneven = stepped_plane(3.8).map(|v: &f32| v.round());
+    let r = p.for_steps(&uneven, &Camera::ABW0);
+    assert!(r.max_residual > q.max_residual && r.max_residual < 1.4 * q.max_residual, "{}", r.max_residual);
+    assert!(r.max_angle_deg > q.max_angle_deg, "{}", r.max_angle_deg);
     // 1-step rounding (real ABW): a tilt of about 32°, under the limit; continuous depth; the rule off.
     assert_eq!(p.for_steps(&stepped_plane(1.0), &Camera::ABW0), p);
     let continuous = Grid::from_fn(120, 100, |x, y| 60.0 + 0.35 * x as f32 + 0.01 * ((x * y) % 7) as f32);

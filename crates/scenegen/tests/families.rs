@@ -93,6 +93,8 @@ fn families_share_their_scenes_and_differ_in_noise() {
     // Staircase: the estimator sees the family's step, 3 × strength.
     assert_eq!(estimate(&range_of(&scene(Family::Staircase, 1.0))).step, Some(3.0));
     assert_eq!(estimate(&range_of(&scene(Family::Staircase, 2.0))).step, Some(6.0));
+    // 1.33: steps of 3.99 stored in whole units, risers of 4 and, where the rounding drifts, 3.
+    assert_eq!(estimate(&range_of(&scene(Family::Staircase, 1.33))).step, Some(4.0));
 
     // Kinect: noise grows with strength, and with depth (far half of the range vs near half).
     let k1 = scene(Family::Kinect, 1.0);
