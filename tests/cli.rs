@@ -305,7 +305,7 @@ fn nyu_grey_reads_the_inverted_rendering_with_the_kinect_camera() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", stderr_of(&o));
     assert!(
-        out.contains("400 − stored value") && out.contains("pinhole") && out.contains("300.0000"),
+        out.contains("370 − stored value") && out.contains("pinhole") && out.contains("270.0000"),
         "{out}"
     );
     let o =

@@ -62,7 +62,7 @@ def read(
 ) -> Tuple[np.ndarray, Camera]:
     """Reads a depth file (ABW rasterfile, PGM, PNG, TIFF, PCD): float32 depth (NaN = no data) and its camera.
 
-    nyu_grey=True reads the 8-bit NYU frames of Jin et al. as the CLI's --nyu-grey (depth = 400 - grey)."""
+    nyu_grey=True reads the 8-bit NYU frames of Jin et al. as the CLI's --nyu-grey (depth = 370 - grey)."""
 
 def read_bytes(
     data: bytes,

@@ -52,7 +52,7 @@ def test_read_nyu_grey_as_the_cli(scene_file: Path, cli: Path) -> None:
     raw = scene()
     depth, camera = rangeseg.read(scene_file, nyu_grey=True)
     assert np.array_equal(np.isnan(depth), raw == 0)
-    assert np.array_equal(depth[raw != 0], (400.0 - raw[raw != 0]).astype(np.float32))
+    assert np.array_equal(depth[raw != 0], (370.0 - raw[raw != 0]).astype(np.float32))
     info = subprocess.run([str(cli), "info", "--nyu-grey", str(scene_file)], capture_output=True, text=True)
     assert f"fx={camera.fx:.2f} fy={camera.fy:.2f}" in info.stdout, (camera, info.stdout)
     same, _ = rangeseg.read_bytes(scene_file.read_bytes(), "abw.test.19.range", nyu_grey=True)

@@ -22,7 +22,7 @@ pub(crate) struct ReadArgs {
     /// Samples are raw NYU/Kinect disparity: depth_m = 351.3 / (1092.5 − raw), 2047 = no data.
     #[arg(long)]
     pub(crate) nyu_disparity: bool,
-    /// Inputs are the 8-bit NYU frames of Jin et al. (grey renders depth, nearer = brighter): depth = 400 − grey,
+    /// Inputs are the 8-bit NYU frames of Jin et al. (grey renders depth, nearer = brighter): depth = 370 − grey,
     /// Kinect intrinsics of their 564 × 427 crop (see docs/method.md §2.3). `--camera` still overrides the camera.
     #[arg(long, conflicts_with_all = ["nyu_disparity", "depth_scale"])]
     pub(crate) nyu_grey: bool,

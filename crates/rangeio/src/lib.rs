@@ -311,12 +311,13 @@ pub fn nyu_disparity_to_depth(raw: u16) -> f32 {
 /// (`rawDepth_K.bmp`, 564 × 427): the grey value renders depth nearer-is-brighter, close to linear in depth
 /// (a plane's depth is the inverse of an affine function of the pixel, and `offset − grey` is that depth up to
 /// scale: robust plane fits over the 151 GT planes of 20 frames leave a median 3.9 grey levels for offsets 350–500,
-/// against 4.7 for the grey value itself and up to 10 on receding floors and ceilings), seen through the Kinect's
+/// against 4.7 for the grey value itself and up to 10 on receding floors and ceilings; within that flat range the
+/// segmentation does best at 355–385, so 370: docs/method.md §2.3), seen through the Kinect's
 /// colour-camera intrinsics (fx 518.86, fy 519.47, principal point 325.58, 253.74 in the 640 × 480 frame) shifted
 /// by the crop (38 columns, 44 rows). The scale of depth is unknown and does not matter to a plane.
 pub const NYU_GREY: NyuGrey = NyuGrey {
     camera: Camera::Pinhole { fx: 518.86, fy: 519.47, cx: 287.58, cy: 209.74, depth_scale: 1.0 },
-    inverted_depth: 400.0,
+    inverted_depth: 370.0,
 };
 
 /// A camera together with the inverted-depth offset its images need (see [`NYU_GREY`]).
@@ -477,21 +478,21 @@ mod tests {
 
     #[test]
     fn inverted_depth_maps_every_format_and_keeps_no_data() {
-        // An 8-bit PGM: 0 is no data, 100 and 250 become 300 and 150.
+        // An 8-bit PGM: 0 is no data, 100 and 250 become 270 and 120.
         let pgm = b"P5\n3 1\n255\n\x00\x64\xfa";
         let path = Path::new("x.pgm");
         let f = read_bytes(pgm, path, &ReadOptions::default().nyu_grey()).unwrap();
         assert!(f.range[(0, 0)].is_nan());
-        assert_eq!((f.range[(1, 0)], f.range[(2, 0)]), (300.0, 150.0));
-        assert_eq!(f.units, Units::Inverted { offset: 400.0 });
+        assert_eq!((f.range[(1, 0)], f.range[(2, 0)]), (270.0, 120.0));
+        assert_eq!(f.units, Units::Inverted { offset: 370.0 });
         assert_eq!(f.camera, NYU_GREY.camera);
         let plain = read_bytes(pgm, path, &ReadOptions::default()).unwrap();
         assert_eq!((plain.range[(1, 0)], plain.camera), (100.0, Camera::Grid));
         // Values at or beyond the offset (16-bit samples) would lie at or behind the camera: no data.
-        let wide = b"P5\n3 1\n65535\n\x01\x90\x01\x91\x00\x64";
+        let wide = b"P5\n3 1\n65535\n\x01\x72\x01\x73\x00\x64";
         let f = read_bytes(wide, path, &ReadOptions::default().nyu_grey()).unwrap();
-        assert!(f.range[(0, 0)].is_nan() && f.range[(1, 0)].is_nan(), "400 and 401 → no data");
-        assert_eq!(f.range[(2, 0)], 300.0);
+        assert!(f.range[(0, 0)].is_nan() && f.range[(1, 0)].is_nan(), "370 and 371 → no data");
+        assert_eq!(f.range[(2, 0)], 270.0);
     }
 
     #[test]

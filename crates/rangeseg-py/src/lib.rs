@@ -236,7 +236,7 @@ fn read_options(
     if !nyu_grey {
         return Ok(opts);
     }
-    // As the CLI's --nyu-grey: depth = 400 − grey and the Kinect intrinsics of the crop, unless a camera is given.
+    // As the CLI's --nyu-grey: depth = 370 − grey and the Kinect intrinsics of the crop, unless a camera is given.
     let nyu = opts.nyu_grey();
     Ok(rangeio::ReadOptions { camera: camera.or(nyu.camera), ..nyu })
 }
