@@ -45,6 +45,13 @@ pub(crate) struct Buffers {
     bands: Vec<(u32, u32, u32)>,
 }
 
+impl Buffers {
+    /// The border list [`give_back`] examines when told its border is given.
+    pub(crate) fn border_mut(&mut self) -> &mut Vec<u32> {
+        &mut self.border
+    }
+}
+
 /// A band found by [`flood`]: the labels of the giving and taking regions, its pixel count, the moments of its
 /// points and its summed gain.
 struct Band {
@@ -59,24 +66,32 @@ struct Band {
 /// points `moments[l − 1]` sums) to the adjacent region whose plane they lie on (see the module), for pairs of
 /// regions whose normals are at most `max_angle_deg` apart. Bands are found from the labels given, in raster order
 /// of their first border pixel, and moved together. Returns the number of pixels moved.
+///
+/// With `border_given`, the border pixels are those of [`Buffers::border_mut`] (the border pixels of `groups` in
+/// raster order, as `refine::border_pixels_into` finds them); otherwise it scans for them.
 pub(crate) fn give_back(
     scene: &Scene<'_>,
     groups: &mut [u32],
     (planes, moments): (&[Plane], &[Moments]),
     max_angle_deg: f64,
+    border_given: bool,
     bufs: &mut Buffers,
 ) -> u32 {
     let (w, h) = (scene.w, scene.h);
     bufs.taken.resize(w * h, false);
     bufs.bands.clear();
     // Each list holds a pixel (or a band of at least one pixel) at most once: room reserved once, so later frames
-    // reuse the memory.
-    for list in [&mut bufs.border, &mut bufs.members, &mut bufs.stack] {
+    // reuse the memory (a given border list comes with that room).
+    for list in [&mut bufs.members, &mut bufs.stack] {
         list.clear();
         list.reserve(w * h);
     }
     bufs.bands.reserve(w * h);
-    border_pixels_into(groups, w, h, &mut bufs.border);
+    if !border_given {
+        bufs.border.clear();
+        bufs.border.reserve(w * h);
+        border_pixels_into(groups, w, h, &mut bufs.border);
+    }
     let cos_min = max_angle_deg.to_radians().cos();
     for k in 0..bufs.border.len() {
         let i = bufs.border[k] as usize;
@@ -208,7 +223,7 @@ mod tests {
             moments[l as usize - 1].add(scene.point(i % w, i / w).unwrap());
         }
         let planes = moments.map(|m| fit_plane(&m, &camera));
-        give_back(&scene, &mut groups, (&planes, &moments), max_angle_deg, &mut Buffers::default());
+        give_back(&scene, &mut groups, (&planes, &moments), max_angle_deg, false, &mut Buffers::default());
         groups
     }
 

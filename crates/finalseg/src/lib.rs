@@ -280,14 +280,19 @@ fn place_borders(
     }
 
     // 5b. Bands of a neighbour's plane that a region holds, given back whole.
-    let mut band_moved = false;
     if params.band_max_angle_deg > 0.0 {
         if !refit_done {
             refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
             refit_done = true;
         }
+        // The refinement's border list is that of the current labels, once updated around its last moves.
+        let given = params.refine_passes > 0;
+        if given {
+            rbufs.border_after(&pieces.comp, (w, h), bbufs.border_mut());
+        }
         let fits = (&refitted[..], rbufs.moments());
-        band_moved = band::give_back(scene, &mut pieces.comp, fits, params.band_max_angle_deg, bbufs) > 0;
+        let band_moved =
+            band::give_back(scene, &mut pieces.comp, fits, params.band_max_angle_deg, given, bbufs) > 0;
         if band_moved && params.refine_passes > 0 {
             // A refinement round against the planes refitted on the moved bands: the pixels of a band where the
             // leaking region's tilted plane crossed it are outliers of that region's plane now.
@@ -307,8 +312,9 @@ fn place_borders(
         if !refit_done {
             refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
         }
-        // The refinement's border list is that of the current labels, once updated around its last moves.
-        let given = params.refine_passes > 0 && !band_moved;
+        // The refinement's border list is that of the current labels, once updated around its last moves (a band
+        // that moved was followed by a refinement round, which scanned the labels again).
+        let given = params.refine_passes > 0;
         if given {
             rbufs.border_after(&pieces.comp, (w, h), crbufs.border_mut());
         }

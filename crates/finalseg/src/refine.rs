@@ -32,7 +32,8 @@ impl Buffers {
     }
 
     /// Into `out`, the border pixels of `groups` (labels as the last [`refine`] left them, which started from a
-    /// scan or an update of these buffers) in raster order: that call's start list updated around its moves.
+    /// scan or an update of these buffers) in raster order: that call's start list updated around its moves (kept,
+    /// so a second call on labels left unchanged gives the same list).
     pub(crate) fn border_after(&mut self, groups: &[u32], (w, h): (usize, usize), out: &mut Vec<u32>) {
         let Buffers { cand, border, moved, dirty, dirty_list, .. } = self;
         update_border(groups, (w, h), border, moved, (dirty, dirty_list), cand);
@@ -386,6 +387,33 @@ mod tests {
             border_pixels_into(&groups, w, h, &mut want);
             assert_eq!(border, want, "case {case} ({w}×{h})");
             assert!(dirty.iter().all(|&d| !d), "case {case}: dirty flags left set");
+        }
+    }
+
+    /// `border_after` gives the scan's list after moves, and the same list again when called a second time on the
+    /// same labels (the band and crease steps both take it).
+    #[test]
+    fn border_after_twice_matches_a_scan() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(44);
+        let (mut out, mut want) = (Vec::new(), Vec::new());
+        for case in 0..100 {
+            let (w, h) = (rng.random_range(1..50usize), rng.random_range(1..30usize));
+            let mut groups: Vec<u32> =
+                (0..w * h).map(|i| ((i % w) / 7 + 2 * ((i / w) / 5)) as u32 % 4).collect();
+            let mut bufs = Buffers::default();
+            border_pixels_into(&groups, w, h, &mut bufs.border);
+            for _ in 0..rng.random_range(0..(w * h / 4 + 1)) {
+                let i = rng.random_range(0..w * h);
+                if groups[i] != 0 {
+                    groups[i] = rng.random_range(1..5);
+                    bufs.moved.push(i as u32);
+                }
+            }
+            border_pixels_into(&groups, w, h, &mut want);
+            bufs.border_after(&groups, (w, h), &mut out);
+            assert_eq!(out, want, "case {case}: first call");
+            bufs.border_after(&groups, (w, h), &mut out);
+            assert_eq!(out, want, "case {case}: second call");
         }
     }
 
