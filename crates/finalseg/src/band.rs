@@ -38,9 +38,9 @@ pub(crate) struct Buffers {
     border: Vec<u32>,
     /// Per pixel: already in a band (all false between calls).
     taken: Vec<bool>,
-    /// The pixels of every band, band after band, and the flood's stack.
+    /// The pixels of every band, band after band, and the flood's stack (each pixel with its [`in_band`] answer).
     members: Vec<u32>,
-    stack: Vec<u32>,
+    stack: Vec<(u32, Distances)>,
     /// Per band: its members' range in `members`, and the label it moves to (0 = it stays).
     bands: Vec<(u32, u32, u32)>,
 }
@@ -82,10 +82,10 @@ pub(crate) fn give_back(
     bufs.bands.clear();
     // Each list holds a pixel (or a band of at least one pixel) at most once: room reserved once, so later frames
     // reuse the memory (a given border list comes with that room).
-    for list in [&mut bufs.members, &mut bufs.stack] {
-        list.clear();
-        list.reserve(w * h);
-    }
+    bufs.members.clear();
+    bufs.members.reserve(w * h);
+    bufs.stack.clear();
+    bufs.stack.reserve(w * h);
     bufs.bands.reserve(w * h);
     if !border_given {
         bufs.border.clear();
@@ -99,19 +99,22 @@ pub(crate) fn give_back(
         if bufs.taken[i] || a == 0 {
             continue;
         }
-        // The first neighbouring label (in neighbour order) whose band this pixel starts.
-        let mut b = 0u32;
+        // The first neighbouring label (in neighbour order) whose band this pixel starts, and the pixel's distances
+        // to the two planes (a label tested just before, and refused, is not tested again: the same answer).
+        let (mut b, mut tried, mut first) = (0u32, 0u32, None);
         for_neighbours(i % w, i / w, w, h, |j, _, _| {
             let l = groups[j];
-            if b == 0 && l != 0 && l != a && in_band(scene, planes, i, (a, l)).is_some() {
-                b = l;
+            if b == 0 && l != 0 && l != a && l != tried {
+                first = in_band(scene, planes, i, (a, l));
+                if first.is_some() {
+                    b = l;
+                }
+                tried = l;
             }
         });
-        if b == 0 {
-            continue;
-        }
+        let Some(first) = first.filter(|_| b != 0) else { continue };
         let start = bufs.members.len() as u32;
-        let band = flood(scene, groups, planes, (i, a, b), bufs);
+        let band = flood(scene, groups, planes, (i, a, b, first), bufs);
         let shallow = dot(planes[a as usize - 1].normal, planes[b as usize - 1].normal).abs() >= cos_min;
         let to = if shallow && accepts(&band, planes, moments, scene) { b } else { 0 };
         bufs.bands.push((start, bufs.members.len() as u32, to));
@@ -133,15 +136,13 @@ pub(crate) fn give_back(
     moved
 }
 
+/// A band pixel's squared distances to the giving and taking regions' planes in noise scales, and its 3D point.
+type Distances = (f64, f64, [f64; 3]);
+
 /// Whether pixel `i` of region `a` lies on a band of region `b`'s plane: valid, nearer `b`'s plane than `a`'s and
 /// within [`GATE`] noise scales of it. Returns its squared distances to the two planes in noise scales and its 3D
 /// point.
-fn in_band(
-    scene: &Scene<'_>,
-    planes: &[Plane],
-    i: usize,
-    (a, b): (u32, u32),
-) -> Option<(f64, f64, [f64; 3])> {
+fn in_band(scene: &Scene<'_>, planes: &[Plane], i: usize, (a, b): (u32, u32)) -> Option<Distances> {
     let p = scene.point(i % scene.w, i / scene.w)?;
     let (pa, pb) = (&planes[a as usize - 1], &planes[b as usize - 1]);
     let sigma = pa.rms.max(pb.rms).max(SIGMA_FLOOR);
@@ -149,13 +150,14 @@ fn in_band(
     (db < da && db <= GATE).then_some((da * da, db * db, p))
 }
 
-/// The 4-connected band of region `a` on region `b`'s plane that pixel `i` (in it) starts: its pixels appended to
-/// `bufs.members` and marked in `bufs.taken`.
+/// The 4-connected band of region `a` on region `b`'s plane that pixel `i` (in it, with [`in_band`]'s answer
+/// `first`) starts: its pixels appended to `bufs.members` and marked in `bufs.taken`. A pixel is tested once, when
+/// it is pushed, and its answer kept with it on the stack.
 fn flood(
     scene: &Scene<'_>,
     groups: &[u32],
     planes: &[Plane],
-    (i, a, b): (usize, u32, u32),
+    (i, a, b, first): (usize, u32, u32, Distances),
     bufs: &mut Buffers,
 ) -> Band {
     let (w, h) = (scene.w, scene.h);
@@ -163,22 +165,36 @@ fn flood(
     let mut band = Band { from: a, to: b, n: 0, moments: Moments::default(), gain: 0.0 };
     taken[i] = true;
     stack.clear();
-    stack.push(i as u32);
-    while let Some(k) = stack.pop() {
+    stack.push((i as u32, first));
+    while let Some((k, (sa, sb, p))) = stack.pop() {
+        members.push(k);
+        band.gain += sa - sb;
+        band.n += 1;
+        band.moments.add(p);
         let k = k as usize;
-        members.push(k as u32);
-        if let Some((sa, sb, p)) = in_band(scene, planes, k, (a, b)) {
-            band.gain += sa - sb;
-            band.n += 1;
-            band.moments.add(p);
-        }
-        for_neighbours(k % w, k / w, w, h, |j, x, y| {
-            let four = x == k % w || y == k / w;
-            if four && !taken[j] && groups[j] == a && in_band(scene, planes, j, (a, b)).is_some() {
+        let (x, y) = (k % w, k / w);
+        let mut visit = |j: usize| {
+            if !taken[j]
+                && groups[j] == a
+                && let Some(d) = in_band(scene, planes, j, (a, b))
+            {
                 taken[j] = true;
-                stack.push(j as u32);
+                stack.push((j as u32, d));
             }
-        });
+        };
+        // The 4-neighbours in the order of `for_neighbours`: up, left, right, down.
+        if y > 0 {
+            visit(k - w);
+        }
+        if x > 0 {
+            visit(k - 1);
+        }
+        if x + 1 < w {
+            visit(k + 1);
+        }
+        if y + 1 < h {
+            visit(k + w);
+        }
     }
     band
 }
@@ -225,6 +241,99 @@ mod tests {
         let planes = moments.map(|m| fit_plane(&m, &camera));
         give_back(&scene, &mut groups, (&planes, &moments), max_angle_deg, false, &mut Buffers::default());
         groups
+    }
+
+    /// The band as the flood found it before it kept each pixel's answer on the stack: every pixel tested again when
+    /// popped, its 4-neighbours taken from the 8 of `for_neighbours`.
+    fn flood_testing_twice(
+        scene: &Scene<'_>,
+        groups: &[u32],
+        planes: &[Plane],
+        (i, a, b): (usize, u32, u32),
+        taken: &mut [bool],
+        members: &mut Vec<u32>,
+    ) -> Band {
+        let (w, h) = (scene.w, scene.h);
+        let mut band = Band { from: a, to: b, n: 0, moments: Moments::default(), gain: 0.0 };
+        taken[i] = true;
+        let mut stack = vec![i as u32];
+        while let Some(k) = stack.pop() {
+            let k = k as usize;
+            members.push(k as u32);
+            if let Some((sa, sb, p)) = in_band(scene, planes, k, (a, b)) {
+                band.gain += sa - sb;
+                band.n += 1;
+                band.moments.add(p);
+            }
+            for_neighbours(k % w, k / w, w, h, |j, x, y| {
+                let four = x == k % w || y == k / w;
+                if four && !taken[j] && groups[j] == a && in_band(scene, planes, j, (a, b)).is_some() {
+                    taken[j] = true;
+                    stack.push(j as u32);
+                }
+            });
+        }
+        band
+    }
+
+    /// The flood gives the same members in the same order and the same sums, bit for bit, as testing every pixel
+    /// again when popped, on random noisy two-plane scenes with holes and random labels.
+    #[test]
+    fn flood_matches_testing_each_pixel_twice() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(57);
+        let camera = Camera::Grid;
+        let mut larger = 0;
+        for case in 0..60 {
+            let (w, h) = (rng.random_range(2..40usize), rng.random_range(2..30usize));
+            let split = rng.random_range(0..w);
+            let slope = rng.random_range(0.1..1.0f32);
+            let range: Vec<f32> = (0..w * h)
+                .map(|i| {
+                    let x = i % w;
+                    let v = 100.0
+                        + rng.random_range(-0.3..0.3f32)
+                        + if x >= split { slope * x as f32 } else { 0.0 };
+                    if rng.random_bool(0.03) { f32::NAN } else { v }
+                })
+                .collect();
+            let scene = Scene { range: &range, w, h, camera: &camera };
+            let groups: Vec<u32> = (0..w * h)
+                .map(|i| {
+                    if rng.random_bool(0.1) {
+                        rng.random_range(1..3)
+                    } else if i % w < split / 2 + 1 {
+                        1
+                    } else {
+                        2
+                    }
+                })
+                .collect();
+            let mut moments = [Moments::default(); 2];
+            for (i, &l) in groups.iter().enumerate() {
+                if let Some(p) = scene.point(i % w, i / w) {
+                    moments[l as usize - 1].add(p);
+                }
+            }
+            let planes = moments.map(|m| fit_plane(&m, &camera));
+            for (a, b) in [(1, 2), (2, 1)] {
+                for i in 0..w * h {
+                    let Some(first) = in_band(&scene, &planes, i, (a, b)).filter(|_| groups[i] == a) else {
+                        continue;
+                    };
+                    let mut bufs = Buffers { taken: vec![false; w * h], ..Buffers::default() };
+                    let band = flood(&scene, &groups, &planes, (i, a, b, first), &mut bufs);
+                    let (mut taken, mut members) = (vec![false; w * h], Vec::new());
+                    let want =
+                        flood_testing_twice(&scene, &groups, &planes, (i, a, b), &mut taken, &mut members);
+                    assert_eq!(bufs.members, members, "case {case}, pixel {i}");
+                    assert_eq!((band.n, band.gain.to_bits()), (want.n, want.gain.to_bits()), "case {case}");
+                    assert_eq!(band.moments, want.moments, "case {case}");
+                    larger += usize::from(band.n > 5);
+                }
+            }
+        }
+        assert!(larger > 100, "only {larger} floods of more than 5 pixels");
     }
 
     #[test]
