@@ -145,8 +145,9 @@ fn is_border(groups: &[u32], w: usize, h: usize, x: usize, y: usize) -> bool {
 }
 
 /// Every labelled pixel of `groups` (rows of `w`) with an 8-neighbour of another nonzero label, in raster
-/// order, into `cand`. In the interior rows, a chunk of pixels whose 3-row window holds one label is skipped
-/// whole (none of them can be a border pixel); the others go through [`is_border`].
+/// order, into `cand`. In the interior rows, a chunk of pixels whose 3-row window holds no nonzero label but that
+/// of its first pixel is skipped whole (none of them can be a border pixel); the others are tested side by side into a bit mask, by
+/// the rule of [`is_border`] on the eight neighbours read directly. The frame's pixels go through [`is_border`].
 pub(crate) fn border_pixels_into(groups: &[u32], w: usize, h: usize, cand: &mut Vec<u32>) {
     const CHUNK: usize = 16;
     cand.clear();
@@ -166,14 +167,34 @@ pub(crate) fn border_pixels_into(groups: &[u32], w: usize, h: usize, cand: &mut 
             while x + CHUNK < w {
                 let v = row[x];
                 let cols = x - 1..x + CHUNK + 1;
-                let diff = up[cols.clone()]
-                    .iter()
-                    .zip(&row[cols.clone()])
-                    .zip(&dn[cols])
-                    .fold(0u32, |a, ((&p, &q), &r)| a | (p ^ v) | (q ^ v) | (r ^ v));
+                // Nonzero iff the window holds a nonzero label other than `v` (each label's difference from `v`
+                // masked to 0 where the label is 0).
+                let diff = up[cols.clone()].iter().zip(&row[cols.clone()]).zip(&dn[cols.clone()]).fold(
+                    0u32,
+                    |a, ((&p, &q), &r)| {
+                        let other = |l: u32| (l ^ v) & 0u32.wrapping_sub(u32::from(l != 0));
+                        a | other(p) | other(q) | other(r)
+                    },
+                );
                 if diff != 0 {
-                    for xx in x..x + CHUNK {
-                        test(xx, y, cand);
+                    let (u, r, d) = (&up[cols.clone()], &row[cols.clone()], &dn[cols]);
+                    let mut bits = 0u32;
+                    for k in 0..CHUNK {
+                        let l = r[k + 1];
+                        let differs = |n: u32| (n != 0) & (n != l);
+                        let any = differs(u[k])
+                            | differs(u[k + 1])
+                            | differs(u[k + 2])
+                            | differs(r[k])
+                            | differs(r[k + 2])
+                            | differs(d[k])
+                            | differs(d[k + 1])
+                            | differs(d[k + 2]);
+                        bits |= u32::from((l != 0) & any) << k;
+                    }
+                    while bits != 0 {
+                        cand.push((y * w + x + bits.trailing_zeros() as usize) as u32);
+                        bits &= bits - 1;
                     }
                 }
                 x += CHUNK;
