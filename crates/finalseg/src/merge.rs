@@ -365,18 +365,19 @@ fn merge_fixpoint(
             let (ia, ib) = (ra as usize - 1, rb as usize - 1);
             let (pa, pb) = (planes[ia], planes[ib]);
             let kind = candidates.kinds[k];
-            let agree = kind
-                .agree
-                .is_some_and(|weak| test.agree(&pa, &pb, (&moments[ia], &moments[ib]), weak, scene));
-            let bend = || kind.bend && test.bend(&pa, &pb, &moments[ia], &moments[ib], scene);
-            if !(agree || bend()) {
-                continue;
-            }
+            let agree = || {
+                kind.agree.and_then(|weak| test.agree(&pa, &pb, (&moments[ia], &moments[ib]), weak, scene))
+            };
+            let bend = || kind.bend.then(|| test.bend(&pa, &pb, &moments[ia], &moments[ib], scene)).flatten();
+            let Some(joint) = agree().or_else(|| bend().map(Some)) else { continue };
             let (root, other) = (ra.min(rb), ra.max(rb));
             parent[other as usize] = root;
             let m = moments[other as usize - 1];
             moments[root as usize - 1].merge(&m);
-            planes[root as usize - 1] = fit_plane(&moments[root as usize - 1], scene.camera);
+            // The test's joint plane, where it fitted one, is this fit: its moments are these, field by field the
+            // same sum of two (f64 addition is commutative), so the same bits.
+            planes[root as usize - 1] =
+                joint.unwrap_or_else(|| fit_plane(&moments[root as usize - 1], scene.camera));
             changed = true;
             merges += 1;
         }
@@ -388,7 +389,7 @@ fn merge_fixpoint(
 
 impl PlaneTest {
     /// Whether groups a and b (planes `pa`, `pb`, moments `ma`, `mb`) may merge over a border that
-    /// is `weak`ly supported or not.
+    /// is `weak`ly supported or not: `None` if not, else the plane fitted to both if the test fitted it.
     fn agree(
         &self,
         pa: &Plane,
@@ -396,22 +397,22 @@ impl PlaneTest {
         (ma, mb): (&Moments, &Moments),
         weak: bool,
         scene: &Scene<'_>,
-    ) -> bool {
+    ) -> Option<Option<Plane>> {
         let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
         let (ea, eb) = (mean_sq_residual(ma, pb), mean_sq_residual(mb, pa));
         if dot.abs() < self.cos_max || ea > self.r2 || eb > self.r2 {
-            return false;
+            return None;
         }
         // Within one region-growing region over a supported border: merge only pieces that lie on
         // one plane within their own noise. (+1e-12: noise-free pieces of one plane have RMS 0 and
         // rounding-level residuals.)
         if weak || !(ea > self.k2 * pa.rms * pa.rms + 1e-12 || eb > self.k2 * pb.rms * pb.rms + 1e-12) {
-            return true;
+            return Some(None);
         }
         // Or one plane through both explains each nearly as well as its own: a thin piece's plane, extrapolated
         // to the other piece, strays by its tilt error.
         if self.j2 == 0.0 {
-            return false;
+            return None;
         }
         // And the two planes meet between the pieces: halfway between their centroids they lie within the
         // larger RMS of each other (parallel faces at two depths do not; a joint plane can tilt across a step).
@@ -419,34 +420,37 @@ impl PlaneTest {
         let mid = [0.5 * (ca[0] + cb[0]), 0.5 * (ca[1] + cb[1]), 0.5 * (ca[2] + cb[2])];
         let apart = (pa.signed(mid) - dot.signum() * pb.signed(mid)).abs();
         if apart > pa.rms.max(pb.rms) {
-            return false;
+            return None;
         }
         let pj = fit_plane(&ma.combined(mb), scene.camera);
-        mean_sq_residual(ma, &pj) <= self.j2 * pa.rms * pa.rms + 1e-12
-            && mean_sq_residual(mb, &pj) <= self.j2 * pb.rms * pb.rms + 1e-12
+        (mean_sq_residual(ma, &pj) <= self.j2 * pa.rms * pa.rms + 1e-12
+            && mean_sq_residual(mb, &pj) <= self.j2 * pb.rms * pb.rms + 1e-12)
+            .then_some(Some(pj))
     }
 
     /// Whether groups a and b, whose border is continuous, may merge as two sides of a bend: one
     /// plane through both within `merge_max_residual`, and normals within `bend_max_angle_deg` or
-    /// that joint plane explaining each group within `bend_fit_ratio` times the larger of their RMS.
-    fn bend(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, scene: &Scene<'_>) -> bool {
-        let Some(cos_bend) = self.cos_bend else { return false };
+    /// that joint plane explaining each group within `bend_fit_ratio` times the larger of their RMS. Returns that
+    /// joint plane if they may.
+    fn bend(&self, pa: &Plane, pb: &Plane, ma: &Moments, mb: &Moments, scene: &Scene<'_>) -> Option<Plane> {
+        let cos_bend = self.cos_bend?;
         let dot: f64 = (0..3).map(|k| pa.normal[k] * pb.normal[k]).sum();
         let within_angle = dot.abs() >= cos_bend;
         if !within_angle && self.fit2 == 0.0 {
-            return false;
+            return None;
         }
         let mut joint = *ma;
         joint.merge(mb);
         let pj = fit_plane(&joint, scene.camera);
         if pj.rms * pj.rms > self.r2 {
-            return false;
+            return None;
         }
         // A sharper bend: each group's own normal is unreliable (a thin terrace of a quantised slope)
         // when the joint plane explains it nearly as well as its own plane does.
         let scatter = pa.rms.max(pb.rms);
         let limit = self.fit2 * scatter * scatter;
-        within_angle || (mean_sq_residual(ma, &pj) <= limit && mean_sq_residual(mb, &pj) <= limit)
+        (within_angle || (mean_sq_residual(ma, &pj) <= limit && mean_sq_residual(mb, &pj) <= limit))
+            .then_some(pj)
     }
 }
 
@@ -616,8 +620,16 @@ mod tests {
             };
             t.agree(&pa, &pb, (&ma, &mb), false, &scene)
         };
-        assert!(!test(0.0, 0.0), "the cross test alone (ratio 1) refuses");
-        assert!(test(1.1, 0.0), "one plane explains both");
-        assert!(!test(1.1, 1.0), "a step of about five times the noise stays");
+        assert!(test(0.0, 0.0).is_none(), "the cross test alone (ratio 1) refuses");
+        // One plane explains both; the test gives that plane, the same bits as the union's fit in either order
+        // (the merge takes it instead of fitting again).
+        let (ma, mb) = (strip(0.0, 0.0), strip(30.0, 0.0));
+        let joint = test(1.1, 0.0).expect("one plane explains both").expect("the joint plane was fitted");
+        for union in [ma.combined(&mb), mb.combined(&ma)] {
+            let fit = fit_plane(&union, scene.camera);
+            let bits = |p: &Plane| (p.normal.map(f64::to_bits), p.offset.to_bits(), p.rms.to_bits());
+            assert_eq!(bits(&fit), bits(&joint));
+        }
+        assert!(test(1.1, 1.0).is_none(), "a step of about five times the noise stays");
     }
 }
