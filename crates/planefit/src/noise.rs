@@ -275,14 +275,18 @@ fn window_rms(range: &rangeimage::RangeImage, stride: usize, out: &mut Vec<f64>)
     let offsets = window_offsets(w);
     // Σx² = Σy² = 5 · (4 + 1 + 0 + 1 + 4) over the centred window.
     let sxx = 50.0;
-    let xs: Vec<usize> = (0..=w - WINDOW).step_by(stride).collect();
+    // The corners' columns are k · stride for k < nx, taken `LANES` at a time (a last, shorter group fills its
+    // unused lanes with its first column).
+    let nx = (w - WINDOW) / stride + 1;
+    let lane_dx: [usize; LANES] = std::array::from_fn(|l| l * stride);
     for y0 in (0..=h - WINDOW).step_by(stride) {
-        for group in xs.chunks(LANES) {
+        for k0 in (0..nx).step_by(LANES) {
+            let (group, first) = (LANES.min(nx - k0), y0 * w + k0 * stride);
             let corner: [usize; LANES] =
-                std::array::from_fn(|l| y0 * w + group.get(l).copied().unwrap_or(group[0]));
+                std::array::from_fn(|l| first + if l < group { lane_dx[l] } else { 0 });
             let centre: [f64; LANES] = corner.map(|c| f64::from(data[c + r * w + r]));
             let full: [bool; LANES] = std::array::from_fn(|l| {
-                l < group.len()
+                l < group
                     && centre[l].is_finite()
                     && offsets.iter().all(|&(_, _, o)| data[corner[l] + o].is_finite())
             });
