@@ -428,7 +428,7 @@ mod tests {
             (set.images[0].camera, set.images[0].inverted_depth),
             (nyu.camera, Some(nyu.inverted_depth))
         );
-        assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 300.0);
+        assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 270.0);
         // An explicit camera wins, without the inversion.
         let spec = DataSpec { camera: Some(Camera::Grid), ..spec };
         let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
