@@ -100,9 +100,10 @@ pub struct Params {
     pub max_residual: f32,
     /// Default mode, on depth quantised in steps (`planefit::noise::is_step`, else `near_uniform_step`: the
     /// highest riser): the normal-angle limit is at least the tilt of this many steps per pixel and the residual
-    /// limit at least one step, both in 3D at the image centre and its mean depth (0 = off). A slanted plane in coarse steps is a staircase of
-    /// flat terraces; 0.3 is the slope a 5 × 5 plane fit finds across a single step, so the normals of windows on
-    /// a step edge stay within the limit and the next terrace within the residual.
+    /// limit at least one step, both in 3D at the image centre and its mean depth (0 = off). A slanted plane in
+    /// coarse steps is a staircase of flat terraces; 0.3 is the slope a 5 × 5 plane fit finds across a single
+    /// step, so the normals of windows on a step edge stay within the limit and the next terrace within the
+    /// residual.
     pub step_tilt: f32,
     /// Default mode: the residual limit of growth is `max(max_residual, this × the region's RMS
     /// distance to its own plane)` (0 = `max_residual` alone). The region's own scatter, measured
@@ -257,7 +258,7 @@ impl Params {
                 _ => return p,
             }
         };
-        tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in uniform steps");
+        tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in steps");
         p.max_angle_deg = p.max_angle_deg.max(tilt_deg);
         p.max_residual = p.max_residual.max(step_3d as f32);
         p
