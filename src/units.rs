@@ -14,7 +14,7 @@
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
 //! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
 //! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
-//! ([`planefit::noise::is_step`], else [`planefit::noise::near_uniform_step`]; the step test runs only when σ
+//! ([`planefit::noise::step_from_smallest`]; the step test runs only when σ
 //! is below that): noise-free quantised depth (rendered, or a sensor that smooths before it rounds) reads
 //! σ ≈ 0 where most windows lie within one step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
 
@@ -80,11 +80,7 @@ pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec
     // The step test runs only when it matters: σ below the rounding error of the smallest difference.
     let rounding = match planefit::noise::smallest_difference(range, SAMPLE_STRIDE) {
         Some(q) if sigma < q * depth_scale / 12f64.sqrt() => {
-            let step = if planefit::noise::is_step(range, SAMPLE_STRIDE, q) {
-                Some(q)
-            } else {
-                planefit::noise::near_uniform_step(range, SAMPLE_STRIDE, q)
-            };
+            let step = planefit::noise::step_from_smallest(range, SAMPLE_STRIDE, q);
             step.map_or(0.0, |q| q * depth_scale / 12f64.sqrt())
         }
         _ => 0.0,

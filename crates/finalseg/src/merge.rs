@@ -439,9 +439,7 @@ impl PlaneTest {
         if !within_angle && self.fit2 == 0.0 {
             return None;
         }
-        let mut joint = *ma;
-        joint.merge(mb);
-        let pj = fit_plane(&joint, scene.camera);
+        let pj = fit_plane(&ma.combined(mb), scene.camera);
         if pj.rms * pj.rms > self.r2 {
             return None;
         }

@@ -208,6 +208,17 @@ pub fn near_uniform_step(range: &rangeimage::RangeImage, stride: usize, smallest
         .then_some(largest)
 }
 
+/// The depth step of every `stride`-th row given `smallest`, the smallest nonzero difference between neighbours there
+/// ([`smallest_difference`]): `smallest` if [`is_step`], else [`near_uniform_step`]; `None` for continuous depth.
+/// One or two passes over `1 / stride` of the image, no allocation.
+///
+/// # Panics
+/// If `stride` is 0.
+#[must_use]
+pub fn step_from_smallest(range: &rangeimage::RangeImage, stride: usize, smallest: f64) -> Option<f64> {
+    if is_step(range, stride, smallest) { Some(smallest) } else { near_uniform_step(range, stride, smallest) }
+}
+
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
 /// row and column (`stride` = 1: every window, as [`estimate`]); NaN when fewer than 20 windows hold data.
 ///

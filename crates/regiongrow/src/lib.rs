@@ -98,8 +98,8 @@ pub struct Params {
     pub max_angle_deg: f32,
     /// Default mode: maximum distance of a pixel's 3D point to the region's plane, in camera units.
     pub max_residual: f32,
-    /// Default mode, on depth quantised in steps (`planefit::noise::is_step`, else `near_uniform_step`: the
-    /// highest riser): the normal-angle limit is at least the tilt of this many steps per pixel and the residual
+    /// Default mode, on depth quantised in steps (`planefit::noise::step_from_smallest`: a uniform step or
+    /// the highest riser): the normal-angle limit is at least the tilt of this many steps per pixel and the residual
     /// limit at least one step, both in 3D at the image centre and its mean depth (0 = off). A slanted plane in
     /// coarse steps is a staircase of flat terraces; 0.3 is the slope a 5 × 5 plane fit finds across a single
     /// step, so the normals of windows on a step edge stay within the limit and the next terrace within the
@@ -204,8 +204,8 @@ impl Params {
     }
 
     /// These parameters with the normal-angle and residual limits raised for the depth steps of `range` (see
-    /// `step_tilt`); unchanged if the depth has no step (`planefit::noise::is_step`, else `near_uniform_step`)
-    /// or `step_tilt` is 0.
+    /// `step_tilt`); unchanged if the depth has no step (`planefit::noise::step_from_smallest`) or
+    /// `step_tilt` is 0.
     #[must_use]
     pub fn for_steps(&self, range: &RangeImage, camera: &Camera) -> Params {
         let mut p = self.clone();
@@ -243,20 +243,16 @@ impl Params {
         let raises = |(step_3d, _, tilt_deg): (f64, f64, f32)| {
             tilt_deg > p.max_angle_deg || step_3d as f32 > p.max_residual
         };
-        let Some(at_smallest) = limits(step) else { return p };
         // Steps are never smaller than the smallest difference, so nothing to raise there means nothing at all.
-        if !raises(at_smallest) {
+        if !limits(step).is_some_and(raises) {
             return p;
         }
-        let (step, (step_3d, pitch, tilt_deg)) = if planefit::noise::is_step(range, STEP_STRIDE, step) {
-            (step, at_smallest)
-        } else {
-            match planefit::noise::near_uniform_step(range, STEP_STRIDE, step)
+        let Some((step, (step_3d, pitch, tilt_deg))) =
+            planefit::noise::step_from_smallest(range, STEP_STRIDE, step)
                 .and_then(|s| Some((s, limits(s)?)))
-            {
-                Some((s, l)) if raises(l) => (s, l),
-                _ => return p,
-            }
+                .filter(|&(_, l)| raises(l))
+        else {
+            return p;
         };
         tracing::debug!(step, step_3d, pitch, tilt_deg, "depth in steps");
         p.max_angle_deg = p.max_angle_deg.max(tilt_deg);
