@@ -132,6 +132,7 @@ impl Config {
         c.segment.crease_passes = 0;
         c.segment.band_max_angle_deg = 0.0;
         c.segment.outlier_scales = 0.0;
+        c.segment.curved_merge_ratio = 0.0;
         c.segment.bend_max_angle_deg = 0.0;
         c.segment.within_joint_rms_ratio = 0.0;
         c.segment.within_close_px = 0;
@@ -492,6 +493,11 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "segment.outlier_min_px",
         "Smallest 4-connected group of such outliers that outlier_scales leaves unlabelled.",
     ),
+    (
+        "segment.curved_merge_ratio",
+        "Last, adjacent regions merge if one quadric fits their union within this multiple of the larger plane RMS (0 = off): a surface the depth encoding bends.",
+    ),
+    ("segment.curved_max_angle_deg", "Largest angle between two regions' normals for curved_merge_ratio."),
 ];
 
 /// The comment of `key` (`table.key`) in [`KEY_DOCS`].

@@ -6,6 +6,7 @@
 mod band;
 mod components;
 mod crease;
+mod curved;
 mod fill;
 mod merge;
 mod outliers;
@@ -81,6 +82,12 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    region's pixels farther than `outlier_scales` noise scales from its plane (its RMS, at least 0.25),
 ///    in 4-connected groups of at least `outlier_min_px`, become unlabelled: a small face seen edge-on
 ///    that no region of its own holds, an object on a wall, the mixed pixels of a jump.
+/// 8. Curved merges (`regions` mode, `curved_merge_ratio` > 0): two adjacent regions whose normals are at most
+///    `curved_max_angle_deg` apart merge when the least-squares quadric of their union (height over the union's
+///    plane, quadratic in the two in-plane coordinates) fits it, and fits the pixels along their border, within
+///    `curved_merge_ratio` times the two regions' plane RMS pooled over their pixels (at least 0.25), and within
+///    `merge_max_residual`: one surface that a depth encoding bends, cut along folds that are not there. Edge
+///    support does not matter here: the edges split a surface only where its geometry changes.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -129,6 +136,8 @@ pub struct Scratch {
     outliers: outliers::Buffers,
     /// Step 5b: the band step's buffers.
     band: band::Buffers,
+    /// Step 8: the curved merge's buffers.
+    curved: curved::Buffers,
     /// Steps 2 and 5–7: the 3D points of one row.
     row: Vec<[f64; 3]>,
     /// Steps 4–8: the merge forest, the root of each label, the final label of each root and the roots in
@@ -180,6 +189,7 @@ pub fn segment_into(
         crease: crbufs,
         outliers: obufs,
         band: bbufs,
+        curved: cvbufs,
         row,
         parent,
         root,
@@ -234,7 +244,23 @@ pub fn segment_into(
         tracing::debug!(released = n, "outliers");
     }
 
-    // 8. Consecutive labels in raster order; region statistics.
+    // 8. Adjacent regions that one gently curved surface explains, merged (pixels carry their groups' roots).
+    if params.curved_merge_ratio > 0.0 && guide.is_some() {
+        root.clear();
+        root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
+        if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
+            for l in &mut pieces.comp {
+                *l = root[*l as usize];
+            }
+        }
+        let limits = (params.curved_merge_ratio, params.curved_max_angle_deg, params.merge_max_residual);
+        let fits = (&mut pieces.moments[..], &mut pieces.planes[..]);
+        let room = (w * h) / (params.min_region_px.max(1) as usize) + 1;
+        let n = curved::merge_curved(&scene, &pieces.comp, parent, fits, limits, (cvbufs, room));
+        tracing::debug!(merges = n, "curved merges");
+    }
+
+    // 9. Consecutive labels in raster order; region statistics.
     pieces.relabel((parent, root, map, order), (w, h), (labels, out));
     (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
 }
@@ -829,6 +855,12 @@ mod tests {
         Params { mode: Mode::Regions, ..Params::default() }
     }
 
+    /// [`regions_mode`] without the curved merge (step 8), which joins coplanar pieces whatever edges lie between
+    /// them: the tests of step 4's edge support use it.
+    fn step4_support() -> Params {
+        Params { curved_merge_ratio: 0.0, ..regions_mode() }
+    }
+
     #[test]
     fn regions_mode_splits_a_region_along_an_edge_line_inside_it() {
         // Region growing merged both planes into one region; C separates them.
@@ -866,19 +898,19 @@ mod tests {
         let range = Grid::from_fn(40, 30, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32);
         let rg = rg_split(&range);
         let none = Grid::new(40, 30, false);
-        let (labels, regions) = segment(&range, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        let (labels, regions) = segment(&range, &Camera::Grid, &none, Some(&rg), &step4_support());
         assert_eq!(regions.len(), 1, "unsupported border, same plane: merged");
         assert_eq!(regions[0].size_px, 40 * 30);
         assert!(labels.as_slice().iter().all(|&l| l == 1));
         assert!(regions[0].rms_residual < 1e-3);
         // The same border with edge support stays.
         let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
-        let (labels, regions) = segment(&range, &Camera::Grid, &edges, Some(&rg), &regions_mode());
+        let (labels, regions) = segment(&range, &Camera::Grid, &edges, Some(&rg), &step4_support());
         assert_eq!(regions.len(), 2, "supported border: kept");
         assert_ne!(labels[(5, 5)], labels[(35, 5)]);
         // An edge along a tenth of the border (support ≈ 0.15 < min_border_support = 0.3): merged.
         let partial = Grid::from_fn(40, 30, |x, y| (x == 19 || x == 20) && y < 3);
-        let (_, regions) = segment(&range, &Camera::Grid, &partial, Some(&rg), &regions_mode());
+        let (_, regions) = segment(&range, &Camera::Grid, &partial, Some(&rg), &step4_support());
         assert_eq!(regions.len(), 1);
         // A tilt of 1.0 vs 0.5 per pixel (about 18° apart in Grid units) is not merged.
         let tilted =
@@ -887,7 +919,7 @@ mod tests {
                 30,
                 |x, _| if x < 20 { 100.0 + 0.5 * x as f32 } else { 110.0 + (x as f32 - 20.0) },
             );
-        let (_, regions) = segment(&tilted, &Camera::Grid, &none, Some(&rg), &regions_mode());
+        let (_, regions) = segment(&tilted, &Camera::Grid, &none, Some(&rg), &step4_support());
         assert_eq!(regions.len(), 2);
     }
 
@@ -902,19 +934,39 @@ mod tests {
         let plane = |x: u32, y: u32| 100.0 + 0.5 * x as f32 + 0.25 * y as f32;
         let image = |f: &dyn Fn(u32, u32) -> f32| Grid::from_fn(40, 30, f);
         let plane_img = image(&plane);
-        assert_eq!(count(&plane_img, &regions_mode()), 1, "one plane: the pieces rejoin");
-        let split = Params { merge_within_region: false, ..regions_mode() };
+        assert_eq!(count(&plane_img, &step4_support()), 1, "one plane: the pieces rejoin");
+        let split = Params { merge_within_region: false, ..step4_support() };
         assert_eq!(count(&plane_img, &split), 2, "without merge_within_region the edges split it");
         // Parallel planes one unit apart (within merge_max_residual = 3, far above their RMS of
         // 0): a real step, kept.
         let step = image(&|x, y| plane(x, y) + if x < 20 { 0.0 } else { 1.0 });
-        assert_eq!(count(&step, &regions_mode()), 2, "a step between parallel pieces stays");
+        assert_eq!(count(&step, &step4_support()), 2, "a step between parallel pieces stays");
         // Two pieces of one noisy plane rejoin, a step of twice the noise does not.
         let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.25 - 0.5;
         let noisy = image(&|x, y| plane(x, y) + noise(x, y));
-        assert_eq!(count(&noisy, &regions_mode()), 1);
+        assert_eq!(count(&noisy, &step4_support()), 1);
         let noisy_step = image(&|x, y| plane(x, y) + noise(x, y) + if x < 20 { 0.0 } else { 0.7 });
-        assert_eq!(count(&noisy_step, &regions_mode()), 2);
+        assert_eq!(count(&noisy_step, &step4_support()), 2);
+    }
+
+    #[test]
+    fn curved_merge_joins_coplanar_pieces_across_edges_but_not_a_step() {
+        // Two region-growing regions of one plane with an edge line on their border: step 4 keeps the supported
+        // border, step 8 joins the pieces (one surface explains both); steps of one unit, and of twice the noise on
+        // a noisy plane, stay (the quadric misses them along the border).
+        let edges = Grid::from_fn(40, 30, |x, _| x == 19 || x == 20);
+        let noise = |x: u32, y: u32| ((x * 7 + y * 13) % 5) as f32 * 0.25 - 0.5;
+        let count = |step: f32, noisy: bool, sp: &Params| {
+            let range = Grid::from_fn(40, 30, |x, y| {
+                let n = if noisy { noise(x, y) } else { 0.0 };
+                100.0 + 0.5 * x as f32 + 0.25 * y as f32 + n + if x < 20 { 0.0 } else { step }
+            });
+            segment(&range, &Camera::Grid, &edges, Some(&rg_split(&range)), sp).1.len()
+        };
+        assert_eq!(count(0.0, false, &step4_support()), 2, "step 4 keeps a supported border");
+        assert_eq!(count(0.0, false, &regions_mode()), 1, "step 8 joins the pieces of one surface");
+        assert_eq!(count(1.0, false, &regions_mode()), 2, "a step of one unit stays");
+        assert_eq!(count(0.7, true, &regions_mode()), 2, "a step of twice the noise stays");
     }
 
     #[test]

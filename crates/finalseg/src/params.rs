@@ -109,6 +109,13 @@ pub struct Params {
     pub outlier_scales: f64,
     /// Smallest group of outlier pixels that `outlier_scales` leaves unlabelled (smaller groups are noise and stay).
     pub outlier_min_px: u32,
+    /// Two adjacent regions whose normals are at most `curved_max_angle_deg` apart merge, after the outlier step, when
+    /// the least-squares quadric of their union fits it within this multiple of the larger of their plane RMS
+    /// residuals (at least 0.25 units): one surface that a depth encoding bends, cut along folds that are not there
+    /// (0 = off).
+    pub curved_merge_ratio: f64,
+    /// Largest angle between two regions' normals for `curved_merge_ratio`.
+    pub curved_max_angle_deg: f64,
 }
 
 impl Default for Params {
@@ -136,6 +143,8 @@ impl Default for Params {
             band_max_angle_deg: 45.0,
             outlier_scales: 2.5,
             outlier_min_px: 10,
+            curved_merge_ratio: 1.1,
+            curved_max_angle_deg: 15.0,
         }
     }
 }
@@ -164,6 +173,8 @@ impl Params {
         if self.outlier_min_px == 0 {
             return Err(ParamError::new("segment.outlier_min_px", "must be ≥ 1"));
         }
+        ParamError::at_least("segment.curved_merge_ratio", self.curved_merge_ratio, 0.0)?;
+        ParamError::in_range("segment.curved_max_angle_deg", self.curved_max_angle_deg, 0.0, 90.0)?;
         Ok(())
     }
 }
