@@ -495,7 +495,7 @@ const KEY_DOCS: &[(&str, &str)] = &[
     ),
     (
         "segment.curved_merge_ratio",
-        "Last, adjacent regions merge if one quadric fits their union within this multiple of the larger plane RMS (0 = off): a surface the depth encoding bends.",
+        "Last, adjacent regions merge if one quadric fits their union within this multiple of their pooled plane RMS (0 = off): a surface the depth encoding bends.",
     ),
     ("segment.curved_max_angle_deg", "Largest angle between two regions' normals for curved_merge_ratio."),
 ];

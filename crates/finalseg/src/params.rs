@@ -109,10 +109,10 @@ pub struct Params {
     pub outlier_scales: f64,
     /// Smallest group of outlier pixels that `outlier_scales` leaves unlabelled (smaller groups are noise and stay).
     pub outlier_min_px: u32,
-    /// Two adjacent regions whose normals are at most `curved_max_angle_deg` apart merge, after the outlier step, when
-    /// the least-squares quadric of their union fits it within this multiple of the larger of their plane RMS
-    /// residuals (at least 0.25 units): one surface that a depth encoding bends, cut along folds that are not there
-    /// (0 = off).
+    /// Two adjacent regions whose normals are at most `curved_max_angle_deg` apart merge, last, when the least-squares
+    /// quadric of their union fits it within this multiple of their plane RMS residuals pooled over their pixels (at
+    /// least 0.25 units) and within `merge_max_residual`: one surface that a depth encoding bends, cut along folds
+    /// that are not there (0 = off).
     pub curved_merge_ratio: f64,
     /// Largest angle between two regions' normals for `curved_merge_ratio`.
     pub curved_max_angle_deg: f64,
