@@ -115,11 +115,13 @@ impl DistanceTerm {
 /// Per move direction: the `win_h × win_w` window (row-major) that covers the disks of radius
 /// `cap` around both the source a and the target b of a C2 move, as squared distances to a
 /// and to b (`C::FAR_A` / `C::FAR` outside the respective disk), so the cells whose cached
-/// distance may change are found by branch-free, vectorisable row scans.
+/// distance may change are found by branch-free, vectorisable row scans. Where b is as far as a, `da` holds
+/// `C::FAR_A` too: a cell there cannot change when the point moves from a to b, which [`affected`] then reads from
+/// `old == da` alone (one compare per cell fewer).
 struct Window<C> {
     /// Linear offset of the window's top-left cell relative to a.
     origin: isize,
-    /// Squared distance to a, or `C::FAR_A` beyond the cap.
+    /// Squared distance to a, or `C::FAR_A` beyond the cap or where it equals the squared distance to b.
     da: Vec<C>,
     /// Squared distance to b, or `C::FAR` beyond the cap.
     db: Vec<C>,
@@ -137,10 +139,11 @@ const LOOK: usize = 16;
 
 /// Whether a C1 cell with cached squared distance `old` may change when the C2 point at squared
 /// distance `da` moves to squared distance `db`: b is strictly closer, or the moved point was
-/// at the cached distance (and b is not at the same distance).
+/// at the cached distance (and b is not at the same distance). `da` comes from a [`Window`], whose `da` is
+/// `C::FAR_A` (never a cached value) where b is at a's distance, so `old == da` already implies `db != old`.
 #[inline(always)]
 fn affected<C: Cell>(old: C, da: C, db: C) -> bool {
-    (old != C::EMPTY) & (db < old) | (old == da) & (db != old)
+    (old != C::EMPTY) & (db < old) | (old == da)
 }
 
 /// Whether any cell of a window row is [`affected`] (branch-free over 16-cell chunks).
@@ -267,7 +270,7 @@ impl<C: Cell> Window<C> {
                 let (dx, dy) = (x0 + wx, y0 + wy);
                 let da2 = dx * dx + dy * dy;
                 let db2 = (dx - mx) * (dx - mx) + (dy - my) * (dy - my);
-                win.da.push(if da2 <= cap2 { C::of(da2 as u32) } else { C::FAR_A });
+                win.da.push(if da2 <= cap2 && da2 != db2 { C::of(da2 as u32) } else { C::FAR_A });
                 win.db.push(if db2 <= cap2 { C::of(db2 as u32) } else { C::FAR });
             }
         }
@@ -692,12 +695,13 @@ impl<C: Cell> State<C> {
         let base = (a as isize + self.win[dir].origin) as usize;
         let mut rows = 0u32;
         {
+            // The tables zipped with the row index (no index checks on them; the same rows in the same order).
             let win = &self.win[dir];
-            let (da, db) = (win.da.as_chunks::<W>().0, win.db.as_chunks::<W>().0);
+            let (da, db) = (&win.da.as_chunks::<W>().0[..h], &win.db.as_chunks::<W>().0[..h]);
             let region = &self.c1d2[base..base + (h - 1) * pw + W];
-            for k in 0..h {
-                let old: &[C; W] = region[k * pw..k * pw + W].try_into().expect("W cells");
-                rows |= u32::from(row_any(old, &da[k], &db[k])) << k;
+            for (k, (a, b)) in da.iter().zip(db).enumerate() {
+                let old: &[C; W] = region[k * pw..].first_chunk::<W>().expect("W cells");
+                rows |= u32::from(row_any(old, a, b)) << k;
             }
         }
         let mut d_int = 0.0;
@@ -1014,5 +1018,56 @@ mod tests {
                 assert_eq!(metropolis(u, x), u < (-x).exp(), "u {u}, x {x}");
             }
         }
+    }
+
+    /// The window tables' `da` (`C::FAR_A` where b is as far as a) with the short [`affected`] give the decision of
+    /// the full rule on the raw squared distance to a, for every window cell of every direction and cap and every
+    /// cached value.
+    #[test]
+    fn window_tables_keep_the_affected_rule() {
+        fn check<C: Cell>(cap: f64) {
+            let term = DistanceTerm::new(cap);
+            let r = cap.floor() as i32;
+            let cap2 = term.cap2 as i32;
+            let win_w = (2 * r as usize + 2).div_ceil(LANES) * LANES;
+            let win_h = 2 * r as usize + 2;
+            let pw = 300;
+            let (_, _, wins) = move_tables::<C>(r, term.cap2, pw, (win_w, win_h));
+            let mut olds: Vec<C> = (0..=term.cap2).map(C::of).collect();
+            olds.extend([C::FAR, C::EMPTY]);
+            let mut k = 0;
+            for my in -1i32..=1 {
+                for mx in -1i32..=1 {
+                    if mx == 0 && my == 0 {
+                        continue;
+                    }
+                    let win = &wins[k];
+                    k += 1;
+                    let (x0, y0) = (-r + mx.min(0), -r + my.min(0));
+                    for wy in 0..win_h as i32 {
+                        for wx in 0..win_w as i32 {
+                            let (dx, dy) = (x0 + wx, y0 + wy);
+                            let da2 = dx * dx + dy * dy;
+                            let raw_da = if da2 <= cap2 { C::of(da2 as u32) } else { C::FAR_A };
+                            let cell = wy as usize * win_w + wx as usize;
+                            let (da, db) = (win.da[cell], win.db[cell]);
+                            for &old in &olds {
+                                let full = (old != C::EMPTY) & (db < old) | (old == raw_da) & (db != old);
+                                assert_eq!(
+                                    affected(old, da, db),
+                                    full,
+                                    "cap {cap}, move ({mx}, {my}), cell ({dx}, {dy})"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for cap in [1.0, 2.5, 3.0, 7.3, 10.0, 15.8] {
+            check::<u8>(cap);
+            check::<u16>(cap);
+        }
+        check::<u16>(20.0);
     }
 }
