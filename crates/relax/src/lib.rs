@@ -237,71 +237,90 @@ pub struct Energy {
 #[must_use]
 pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
     let (mut p1, mut p2) = (EdgeMap::default(), EdgeMap::default());
-    prune_into(c1, c2, t_d_px, &mut p1, &mut p2);
+    prune_into(c1, c2, t_d_px, &mut Near::default(), &mut p1, &mut p2);
     (p1, p2)
 }
 
-/// [`prune`] into `p1` and `p2`, whose memory is reused.
-fn prune_into(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64, p1: &mut EdgeMap, p2: &mut EdgeMap) {
+/// [`prune`] into `p1` and `p2`, whose memory is reused, with the working rows `near`.
+fn prune_into(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64, near: &mut Near, p1: &mut EdgeMap, p2: &mut EdgeMap) {
     assert!(c1.same_size(c2), "relax::prune: C1 and C2 differ in size");
-    within_into(c2, c1, t_d_px, p2);
-    within_into(c1, p2, t_d_px, p1);
+    within_into(c2, c1, t_d_px, near, p2);
+    within_into(c1, p2, t_d_px, near, p1);
 }
 
-/// Writes into `out` the points of `query` at Euclidean distance ≤ `t_px` from a point of `mask` (exact: the
-/// same decision as thresholding the squared EDT of `mask`, but only O(pixels / 64 + |query|·t)).
-/// The mask is packed into one bitset per row; a query pixel (x, y) is kept if for some
-/// `|dy| ≤ t` row `y + dy` has a mask bit within `x ± rx(dy)`, `rx(dy)` the largest integer with
-/// `rx² + dy² ≤ t²`. Rows are tried nearest first, so most queries stop after one or two.
-fn within_into(query: &EdgeMap, mask: &EdgeMap, t_px: f64, out: &mut EdgeMap) {
+/// Chunk width of [`within_into`]'s window test (cells compared side by side).
+const NEAR_LANES: usize = 32;
+
+/// The working rows of [`within_into`], kept between calls (in [`Scratch`]).
+#[derive(Default)]
+struct Near {
+    /// Per pixel, the distance in rows to the nearest mask pixel at or below it in its column (capped).
+    up: Vec<u8>,
+    /// The same from above, for the current row.
+    down: Vec<u8>,
+    /// The current row's vertical distances (the smaller of the two) from column `−r`, capped cells either side.
+    row: Vec<u8>,
+    /// Per column offset `dx + r`: 1 + the largest row distance within `t` at that offset (0 past `2r`).
+    lim: Vec<u8>,
+}
+
+/// Writes into `out` the points of `query` at Euclidean distance ≤ `t_px` (0 ≤ `t_px` ≤ 64) from a point of `mask`
+/// (exact: the same decision as thresholding the squared EDT of `mask`). Per column, the distance in rows to the
+/// nearest mask pixel (capped at `r + 1`, `r = ⌊t⌋`) is kept by a sweep up the image (stored) and one down (the
+/// current row); a query pixel (x, y) is kept if some column `x + dx` (`|dx| ≤ r`) has that distance at row y within
+/// `ry(|dx|)`, the largest integer with `dx² + ry² ≤ t²`: a mask pixel at that offset and at most that many rows away
+/// exists exactly when one is within `t`. Vectorised sweeps and one side-by-side test of `2r + 1` cells per query pixel.
+fn within_into(query: &EdgeMap, mask: &EdgeMap, t_px: f64, near: &mut Near, out: &mut EdgeMap) {
+    assert!(t_px.is_finite() && (0.0..=64.0).contains(&t_px), "relax::within: distance {t_px} out of range");
     let (w, h) = (mask.width() as usize, mask.height() as usize);
-    let words = w.div_ceil(64);
-    let mut bits = vec![0u64; words * h];
-    for (brow, mrow) in bits.chunks_exact_mut(words.max(1)).zip(mask.as_slice().chunks_exact(w.max(1))) {
-        pack_bits(mrow, brow);
+    out.copy_from(query);
+    if w == 0 || h == 0 {
+        return;
     }
     let rx = distance::reach(t_px);
     let r = rx.len() - 1;
-    // Whether row `y` of `bits` has a set bit in columns lo..=hi.
-    let any = |y: usize, lo: usize, hi: usize| {
-        let row = &bits[y * words..(y + 1) * words];
-        let (wl, wh) = (lo / 64, hi / 64);
-        let lo_mask = u64::MAX << (lo % 64);
-        let hi_mask = u64::MAX >> (63 - hi % 64);
-        if wl == wh {
-            return row[wl] & lo_mask & hi_mask != 0;
-        }
-        row[wl] & lo_mask != 0 || row[wl + 1..wh].iter().any(|&v| v != 0) || row[wh] & hi_mask != 0
-    };
-    out.copy_from(query);
-    let o = out.as_mut_slice();
-    // Row by row, so a point's row and column come without a division.
-    for (y, (qrow, orow)) in
-        query.as_slice().chunks_exact(w.max(1)).zip(o.chunks_exact_mut(w.max(1))).enumerate()
-    {
-        for_each_set(qrow, |x| {
-            orow[x] = (0..=r).any(|dy| {
-                let (lo, hi) = (x.saturating_sub(rx[dy]), (x + rx[dy]).min(w - 1));
-                (dy <= y && any(y - dy, lo, hi)) || (dy > 0 && y + dy < h && any(y + dy, lo, hi))
-            });
-        });
+    let cap = (r + 1) as u8;
+    let span = (2 * r + 1).div_ceil(NEAR_LANES) * NEAR_LANES;
+    let Near { up, down, row, lim } = near;
+    lim.clear();
+    lim.resize(span, 0);
+    for (j, l) in lim[..=2 * r].iter_mut().enumerate() {
+        // `rx` does not increase, so the rows within reach of column offset dx are a prefix 0..=ry.
+        *l = rx.iter().take_while(|&&x| x >= j.abs_diff(r)).count() as u8;
     }
-}
-
-/// Packs `row` into `words`, bit `j` of word `k` = `row[64k + j]`; eight flags at a time (as one 8-byte word whose
-/// bytes are 0 or 1, gathered into a byte by one multiplication: byte `i` lands in bit `56 + i` of the product and no
-/// two partial products overlap).
-fn pack_bits(row: &[bool], words: &mut [u64]) {
-    let byte = |c: &[bool]| {
-        let x = u64::from_le_bytes(std::array::from_fn(|k| u8::from(c[k])));
-        x.wrapping_mul(0x0102_0408_1020_4080) >> 56
-    };
-    for (word, chunk) in words.iter_mut().zip(row.chunks(64)) {
-        *word = if chunk.len() == 64 {
-            chunk.chunks_exact(8).enumerate().fold(0u64, |acc, (g, c)| acc | (byte(c) << (8 * g)))
-        } else {
-            chunk.iter().enumerate().fold(0u64, |acc, (j, &b)| acc | (u64::from(b) << j))
-        };
+    let step = |d: u8, m: bool| if m { 0 } else { d.min(cap - 1) + 1 };
+    if up.len() != w * h {
+        up.clear();
+        up.resize(w * h, 0);
+    }
+    down.clear();
+    down.resize(w, cap);
+    for (urow, mrow) in up.chunks_exact_mut(w).zip(mask.as_slice().chunks_exact(w)).rev() {
+        for ((u, d), &m) in urow.iter_mut().zip(down.iter_mut()).zip(mrow) {
+            *d = step(*d, m);
+            *u = *d;
+        }
+    }
+    down.fill(cap);
+    row.clear();
+    row.resize(r + w + span, cap);
+    let o = out.as_mut_slice();
+    for ((qrow, orow), (urow, mrow)) in query
+        .as_slice()
+        .chunks_exact(w)
+        .zip(o.chunks_exact_mut(w))
+        .zip(up.chunks_exact(w).zip(mask.as_slice().chunks_exact(w)))
+    {
+        for (((v, d), &u), &m) in row[r..r + w].iter_mut().zip(down.iter_mut()).zip(urow).zip(mrow) {
+            *d = step(*d, m);
+            *v = (*d).min(u);
+        }
+        for_each_set(qrow, |x| {
+            orow[x] = row[x..x + span]
+                .chunks_exact(NEAR_LANES)
+                .zip(lim.chunks_exact(NEAR_LANES))
+                .any(|(v, l)| v.iter().zip(l).fold(false, |a, (&v, &l)| a | (v < l)));
+        });
     }
 }
 
@@ -446,6 +465,7 @@ pub struct Scratch {
     p1: EdgeMap,
     p2: EdgeMap,
     supported: EdgeMap,
+    near: Near,
     state: anneal::Buffers,
     initial: Vec<u32>,
     best: Vec<u32>,
@@ -480,8 +500,8 @@ pub fn relax_into(
     }
     debug_assert_eq!(params.validate(), Ok(()), "relax::relax: invalid params");
     let count = |m: &EdgeMap| m.as_slice().iter().filter(|&&b| b).count() as u32;
-    let Scratch { p1, p2, supported, state, initial, best } = scratch;
-    prune_into(c1, c2, params.t_d_px, p1, p2);
+    let Scratch { p1, p2, supported, near, state, initial, best } = scratch;
+    prune_into(c1, c2, params.t_d_px, near, p1, p2);
     let (p1, p2) = (&*p1, &*p2);
     let mut info =
         Info { removed_c1: count(c1) - count(p1), removed_c2: count(c2) - count(p2), ..Info::default() };
@@ -498,7 +518,7 @@ pub fn relax_into(
         anneal(st, params, seed, (initial, best), &mut info, out)
     };
     if params.support_px > 0.0 {
-        within_into(&out.c2, p1, params.support_px, supported);
+        within_into(&out.c2, p1, params.support_px, near, supported);
     } else {
         supported.copy_from(&out.c2);
     }
@@ -585,6 +605,92 @@ mod tests {
     use super::*;
     use approx::assert_relative_eq;
     use rand::{RngExt, rngs::Xoshiro256PlusPlus};
+
+    /// The previous support test (one bitset per mask row, rows tried nearest first per query pixel): the reference
+    /// of [`within_into`]. It writes into `out` the points of `query` at Euclidean distance ≤ `t_px` from a point of `mask` (exact: the
+    /// same decision as thresholding the squared EDT of `mask`, but only O(pixels / 64 + |query|·t)).
+    /// The mask is packed into one bitset per row; a query pixel (x, y) is kept if for some
+    /// `|dy| ≤ t` row `y + dy` has a mask bit within `x ± rx(dy)`, `rx(dy)` the largest integer with
+    /// `rx² + dy² ≤ t²`. Rows are tried nearest first, so most queries stop after one or two.
+    fn within_sparse(query: &EdgeMap, mask: &EdgeMap, t_px: f64, out: &mut EdgeMap) {
+        let (w, h) = (mask.width() as usize, mask.height() as usize);
+        let words = w.div_ceil(64);
+        let mut bits = vec![0u64; words * h];
+        for (brow, mrow) in bits.chunks_exact_mut(words.max(1)).zip(mask.as_slice().chunks_exact(w.max(1))) {
+            pack_bits(mrow, brow);
+        }
+        let rx = distance::reach(t_px);
+        let r = rx.len() - 1;
+        // Whether row `y` of `bits` has a set bit in columns lo..=hi.
+        let any = |y: usize, lo: usize, hi: usize| {
+            let row = &bits[y * words..(y + 1) * words];
+            let (wl, wh) = (lo / 64, hi / 64);
+            let lo_mask = u64::MAX << (lo % 64);
+            let hi_mask = u64::MAX >> (63 - hi % 64);
+            if wl == wh {
+                return row[wl] & lo_mask & hi_mask != 0;
+            }
+            row[wl] & lo_mask != 0 || row[wl + 1..wh].iter().any(|&v| v != 0) || row[wh] & hi_mask != 0
+        };
+        out.copy_from(query);
+        let o = out.as_mut_slice();
+        // Row by row, so a point's row and column come without a division.
+        for (y, (qrow, orow)) in
+            query.as_slice().chunks_exact(w.max(1)).zip(o.chunks_exact_mut(w.max(1))).enumerate()
+        {
+            for_each_set(qrow, |x| {
+                orow[x] = (0..=r).any(|dy| {
+                    let (lo, hi) = (x.saturating_sub(rx[dy]), (x + rx[dy]).min(w - 1));
+                    (dy <= y && any(y - dy, lo, hi)) || (dy > 0 && y + dy < h && any(y + dy, lo, hi))
+                });
+            });
+        }
+    }
+
+    /// Packs `row` into `words`, bit `j` of word `k` = `row[64k + j]`; eight flags at a time (as one 8-byte word whose
+    /// bytes are 0 or 1, gathered into a byte by one multiplication: byte `i` lands in bit `56 + i` of the product and no
+    /// two partial products overlap).
+    fn pack_bits(row: &[bool], words: &mut [u64]) {
+        let byte = |c: &[bool]| {
+            let x = u64::from_le_bytes(std::array::from_fn(|k| u8::from(c[k])));
+            x.wrapping_mul(0x0102_0408_1020_4080) >> 56
+        };
+        for (word, chunk) in words.iter_mut().zip(row.chunks(64)) {
+            *word = if chunk.len() == 64 {
+                chunk.chunks_exact(8).enumerate().fold(0u64, |acc, (g, c)| acc | (byte(c) << (8 * g)))
+            } else {
+                chunk.iter().enumerate().fold(0u64, |acc, (j, &b)| acc | (u64::from(b) << j))
+            };
+        }
+    }
+
+    /// The column sweeps of [`within_into`] keep exactly the query pixels the sparse row test keeps, on random
+    /// masks and queries of every density, narrow and wide images, and distances 0–64 (the one `Near` reused).
+    #[test]
+    fn column_sweeps_match_the_sparse_support_test() {
+        use rand::SeedableRng;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(17);
+        let mut near = Near::default();
+        let (mut got, mut want) = (EdgeMap::default(), EdgeMap::default());
+        for case in 0..120u32 {
+            let (w, h) = ([1, 2, 7, 31, 32, 33, 64, 97, 150][case as usize % 9], 1 + (case * 7) % 45);
+            let (pq, pm) =
+                ([0.0, 0.02, 0.3, 1.0][case as usize % 4], [0.0, 0.005, 0.05, 0.5, 1.0][case as usize % 5]);
+            let query = Grid::from_fn(w, h, |_, _| rng.random_bool(pq));
+            let mask = Grid::from_fn(w, h, |_, _| rng.random_bool(pm));
+            for t in [0.0, 0.5, 1.0, 1.5, 2.0, 2.9, 5.0, 9.0, 9.5, 15.9, 16.0, 31.7, 64.0] {
+                within_into(&query, &mask, t, &mut near, &mut got);
+                within_sparse(&query, &mask, t, &mut want);
+                assert_eq!(got, want, "case {case} ({w}×{h}), t {t}");
+            }
+        }
+        // A lone mask pixel: the kept query pixels form the digital disk.
+        let mask = Grid::from_fn(41, 41, |x, y| (x, y) == (20, 20));
+        let query = Grid::new(41, 41, true);
+        within_into(&query, &mask, 9.0, &mut near, &mut got);
+        let want = Grid::from_fn(41, 41, |x, y| (x as i32 - 20).pow(2) + (y as i32 - 20).pow(2) <= 81);
+        assert_eq!(got, want);
+    }
 
     /// `pack_bits` equals one shift per flag on random rows of every length up to 200.
     #[test]
