@@ -324,18 +324,24 @@ fn within_into(query: &EdgeMap, mask: &EdgeMap, t_px: f64, near: &mut Near, out:
     }
 }
 
-/// Calls `f(i)` for every `i` with `mask[i]`, in increasing order; 32-wide all-false blocks are
-/// skipped after one branch-free test (edge maps are sparse).
+/// Calls `f(i)` for every `i` with `mask[i]`, in increasing order. Each 32-wide block is read as four 8-byte words
+/// (flags are bytes 0 or 1): an all-false block is skipped after one test (edge maps are sparse); otherwise its flags
+/// are gathered into a bit mask, eight per multiplication (byte `i` of a word lands in bit `56 + i` of the product and
+/// no two partial products overlap), whose set bits are visited lowest first.
 #[inline]
 pub(crate) fn for_each_set(mask: &[bool], mut f: impl FnMut(usize)) {
+    let word = |g: &[bool]| u64::from_le_bytes(std::array::from_fn(|k| u8::from(g[k])));
     let mut chunks = mask.chunks_exact(32);
     let mut base = 0;
     for c in &mut chunks {
-        if c.iter().fold(false, |a, &b| a | b) {
-            for (k, &b) in c.iter().enumerate() {
-                if b {
-                    f(base + k);
-                }
+        let words = [word(&c[..8]), word(&c[8..16]), word(&c[16..24]), word(&c[24..])];
+        if words.iter().fold(0, |a, &x| a | x) != 0 {
+            let mut bits = words.iter().enumerate().fold(0u32, |acc, (g, &x)| {
+                acc | ((x.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32) << (8 * g)
+            });
+            while bits != 0 {
+                f(base + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
             }
         }
         base += 32;
@@ -690,6 +696,22 @@ mod tests {
         within_into(&query, &mask, 9.0, &mut near, &mut got);
         let want = Grid::from_fn(41, 41, |x, y| (x as i32 - 20).pow(2) + (y as i32 - 20).pow(2) <= 81);
         assert_eq!(got, want);
+    }
+
+    /// `for_each_set` visits exactly the set flags, in increasing order, on random masks of every length up to 300.
+    #[test]
+    fn for_each_set_visits_the_set_flags_in_order() {
+        use rand::SeedableRng;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+        for len in 0..=300usize {
+            for density in [0.0, 0.01, 0.2, 0.7, 1.0] {
+                let mask: Vec<bool> = (0..len).map(|_| rng.random_bool(density)).collect();
+                let mut got = Vec::new();
+                for_each_set(&mask, |i| got.push(i));
+                let want: Vec<usize> = (0..len).filter(|&i| mask[i]).collect();
+                assert_eq!(got, want, "length {len}, density {density}");
+            }
+        }
     }
 
     /// `pack_bits` equals one shift per flag on random rows of every length up to 200.
