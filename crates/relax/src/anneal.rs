@@ -168,12 +168,19 @@ fn row_any<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> b
     acc.iter().fold(0, |x, &y| x | y) != 0
 }
 
-/// Bit `j` set when cell `j` of a `W`-cell window row is [`affected`] (`W ≤ 32`).
+/// Bit `j` set when cell `j` of a `W`-cell window row is [`affected`] (`W` a multiple of 8, at most 32): the
+/// flags side by side as bytes 0 or 1, gathered eight per multiplication (byte `i` of a word lands in bit `56 + i`
+/// of the product and no two partial products overlap).
 #[inline(always)]
 fn row_bits<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> u32 {
-    let mut bits = 0u32;
+    debug_assert!(W.is_multiple_of(8) && W <= 32);
+    let mut acc = [0u8; W];
     for j in 0..W {
-        bits |= u32::from(affected(old[j], da[j], db[j])) << j;
+        acc[j] = u8::from(affected(old[j], da[j], db[j]));
+    }
+    let mut bits = 0u32;
+    for (g, c) in acc.as_chunks::<8>().0.iter().enumerate() {
+        bits |= ((u64::from_le_bytes(*c).wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32) << (8 * g);
     }
     bits
 }
