@@ -168,6 +168,21 @@ fn row_any<C: Cell, const W: usize>(old: &[C; W], da: &[C; W], db: &[C; W]) -> b
     acc.iter().fold(0, |x, &y| x | y) != 0
 }
 
+/// Whether any cell of two `W`-cell window rows is [`affected`] (one branch-free vector test of both).
+#[inline(always)]
+fn row_pair_any<C: Cell, const W: usize>(
+    old0: &[C; W],
+    old1: &[C; W],
+    da: &[[C; W]; 2],
+    db: &[[C; W]; 2],
+) -> bool {
+    let mut acc = [0u8; W];
+    for j in 0..W {
+        acc[j] = u8::from(affected(old0[j], da[0][j], db[0][j]) | affected(old1[j], da[1][j], db[1][j]));
+    }
+    acc.iter().fold(0, |x, &y| x | y) != 0
+}
+
 /// Bit `j` set when cell `j` of a `W`-cell window row is [`affected`] (`W` a multiple of 8, at most 32): the
 /// flags side by side as bytes 0 or 1, gathered eight per multiplication (byte `i` of a word lands in bit `56 + i`
 /// of the product and no two partial products overlap).
@@ -693,8 +708,9 @@ impl<C: Cell> State<C> {
     }
 
     /// [`State::scan_rows`] for windows `W` cells wide (so at most `W` rows high): first a bit mask of the rows
-    /// holding an affected cell, each row one branch-free vector test, then the cells of those rows in the same
-    /// order as [`State::scan_rows`] (the same pushes and the same sum).
+    /// holding an affected cell, two rows at a time one branch-free vector test (then each row of a pair that has
+    /// one), then the cells of those rows in the same order as [`State::scan_rows`] (the same pushes and the same
+    /// sum).
     #[inline(always)]
     fn scan_fixed<const W: usize>(&mut self, a: usize, dir: usize) -> f64 {
         debug_assert!(self.win_w == W && self.win_h <= W && W <= 32);
@@ -706,7 +722,21 @@ impl<C: Cell> State<C> {
             let win = &self.win[dir];
             let (da, db) = (&win.da.as_chunks::<W>().0[..h], &win.db.as_chunks::<W>().0[..h]);
             let region = &self.c1d2[base..base + (h - 1) * pw + W];
-            for (k, (a, b)) in da.iter().zip(db).enumerate() {
+            // Rows in pairs: one vector test of both (most pairs have no affected cell), then each row of a pair
+            // that has one.
+            let (da2, da1) = da.as_chunks::<2>();
+            let (db2, db1) = db.as_chunks::<2>();
+            for (q, (a, b)) in da2.iter().zip(db2).enumerate() {
+                let k = 2 * q;
+                let old0: &[C; W] = region[k * pw..].first_chunk::<W>().expect("W cells");
+                let old1: &[C; W] = region[(k + 1) * pw..].first_chunk::<W>().expect("W cells");
+                if row_pair_any(old0, old1, a, b) {
+                    rows |= u32::from(row_any(old0, &a[0], &b[0])) << k;
+                    rows |= u32::from(row_any(old1, &a[1], &b[1])) << (k + 1);
+                }
+            }
+            if let (Some(a), Some(b)) = (da1.first(), db1.first()) {
+                let k = 2 * da2.len();
                 let old: &[C; W] = region[k * pw..].first_chunk::<W>().expect("W cells");
                 rows |= u32::from(row_any(old, a, b)) << k;
             }
