@@ -868,7 +868,7 @@ fn grow_default<const N: usize>(
     while head < queue.len() {
         let i = queue[head] as usize;
         head += 1;
-        for o in offs {
+        for &o in &offs {
             let j = i.wrapping_add_signed(o);
             // 0 = unlabelled and growable ([`BLOCKED`] covers the rest and the frame).
             if labels[j] != 0 {
@@ -959,7 +959,7 @@ fn grow_paper<const N: usize>(
     while head < queue.len() {
         let i = queue[head] as usize;
         head += 1;
-        for o in offs {
+        for &o in &offs {
             let j = i.wrapping_add_signed(o);
             if labels[j] != 0 {
                 continue;
@@ -1063,7 +1063,7 @@ fn fill(
         }
         let p = point_of(&geo[i]);
         let mut best = (f64::INFINITY, 0u32);
-        for o in offs {
+        for &o in &offs {
             let l = labels[i.wrapping_add_signed(o)];
             if l == 0 {
                 continue;
@@ -1078,7 +1078,7 @@ fn fill(
         if best.0 <= max_res {
             labels[i] = best.1;
             filled += 1;
-            for o in offs {
+            for &o in &offs {
                 let j = i.wrapping_add_signed(o);
                 if free(labels, j) {
                     queue.push(j as u32);
