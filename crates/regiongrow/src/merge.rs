@@ -341,6 +341,27 @@ pub(crate) fn merge<const N: usize>(
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
     bufs: &mut MergeBufs,
 ) -> Merged {
+    isa::dispatch(
+        #[inline(always)]
+        || merge_body(labels, max_label, width, eight, pts, k, params, min_keep, toward, bufs),
+    )
+}
+
+/// [`merge`]'s work, inlined into its `isa::dispatch`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn merge_body<const N: usize>(
+    labels: &mut [u32],
+    max_label: u32,
+    width: usize,
+    eight: bool,
+    pts: &[[f32; N]],
+    k: &[f32],
+    params: &Params,
+    min_keep: u32,
+    toward: &dyn Fn([f64; 3]) -> [f64; 3],
+    bufs: &mut MergeBufs,
+) -> Merged {
     let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, map, .. } = bufs;
     region_stats_into(labels, max_label, pts, k, stats);
     let crit = Criterion::new(params);
