@@ -271,6 +271,16 @@ struct Near {
 /// `ry(|dx|)`, the largest integer with `dx² + ry² ≤ t²`: a mask pixel at that offset and at most that many rows away
 /// exists exactly when one is within `t`. Vectorised sweeps and one side-by-side test of `2r + 1` cells per query pixel.
 fn within_into(query: &EdgeMap, mask: &EdgeMap, t_px: f64, near: &mut Near, out: &mut EdgeMap) {
+    // Compiled for the best instruction set of this CPU (wider sweeps and window tests; the same decisions).
+    isa::dispatch(
+        #[inline(always)]
+        || within_body(query, mask, t_px, near, out),
+    );
+}
+
+/// [`within_into`]'s work, inlined into its `isa::dispatch`.
+#[inline(always)]
+fn within_body(query: &EdgeMap, mask: &EdgeMap, t_px: f64, near: &mut Near, out: &mut EdgeMap) {
     assert!(t_px.is_finite() && (0.0..=64.0).contains(&t_px), "relax::within: distance {t_px} out of range");
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     out.copy_from(query);
