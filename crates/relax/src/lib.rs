@@ -233,7 +233,7 @@ pub struct Energy {
 /// then every C1 point farther than `t_d_px` from the pruned C2. Exact Euclidean distances.
 ///
 /// # Panics
-/// If the maps differ in size.
+/// If the maps differ in size, or `t_d_px` is not in 0..=64 (the range `Params::validate` allows).
 #[must_use]
 pub fn prune(c1: &EdgeMap, c2: &EdgeMap, t_d_px: f64) -> (EdgeMap, EdgeMap) {
     let (mut p1, mut p2) = (EdgeMap::default(), EdgeMap::default());
