@@ -246,13 +246,7 @@ pub fn segment_into(
 
     // 8. Adjacent regions that one gently curved surface explains, merged (pixels carry their groups' roots).
     if params.curved_merge_ratio > 0.0 && guide.is_some() {
-        root.clear();
-        root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
-        if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
-            for l in &mut pieces.comp {
-                *l = root[*l as usize];
-            }
-        }
+        carry_roots(parent, root, &mut pieces.comp);
         let limits = (params.curved_merge_ratio, params.curved_max_angle_deg, params.merge_max_residual);
         // The moments of every label over all of its pixels as they now are (the refit's sums).
         refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
@@ -265,6 +259,18 @@ pub fn segment_into(
     // 9. Consecutive labels in raster order; region statistics.
     pieces.relabel((parent, root, map, order), (w, h), (labels, out));
     (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
+}
+
+/// Gives each pixel of `comp` its merged group's root in `parent`, through a table of the roots in `root` (no pixel
+/// rewritten if nothing merged).
+fn carry_roots(parent: &mut [u32], root: &mut Vec<u32>, comp: &mut [u32]) {
+    root.clear();
+    root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
+    if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
+        for l in comp {
+            *l = root[*l as usize];
+        }
+    }
 }
 
 /// Steps 5, 5b and 6 of [`segment_into`] on the merged groups of `parent`: border refinement, bands and crease
@@ -283,14 +289,7 @@ fn place_borders(
     // Steps 5–7 work on merged groups, so their pixels carry the groups' roots.
     let later = params.crease_passes > 0 || params.band_max_angle_deg > 0.0 || params.outlier_scales > 0.0;
     if params.refine_passes > 0 || later {
-        // Each pixel to its merged group's root, through a table of the roots (none to rewrite if nothing merged).
-        root.clear();
-        root.extend((0..parent.len() as u32).map(|c| find(parent, c)));
-        if root.iter().enumerate().any(|(c, &r)| r != c as u32) {
-            for l in &mut pieces.comp {
-                *l = root[*l as usize];
-            }
-        }
+        carry_roots(parent, &mut *root, &mut pieces.comp);
     }
     // The planes refitted on the refined regions, once there are any (`rbufs` holds their moments).
     let mut refit_done = false;
