@@ -46,7 +46,9 @@ pub(crate) struct Buffers {
 /// Merges, in `parent` (the forest over the labels of `labels`, whose pixels carry their groups' roots), adjacent
 /// groups whose union one quadric explains (module doc), passes over the sorted adjacent pairs until none merges;
 /// `moments` and `planes` (per label at `l − 1`: the core moments and planes the output reports) are merged and
-/// refitted as step 4 does. Returns the number of merges.
+/// refitted as step 4 does; `all` (per label at `l − 1`) holds the moments of each label over all of its pixels, which
+/// the tests use. Candidates are the pairs whose reported planes are within the angle; a pair is tested again only
+/// once a merge has changed one of its groups. Returns the number of merges.
 pub(crate) fn merge_curved(
     scene: &Scene<'_>,
     labels: &[u32],
