@@ -138,9 +138,9 @@ pub struct Scratch {
     band: band::Buffers,
     /// Step 8: the curved merge's buffers.
     curved: curved::Buffers,
-    /// Steps 2 and 5–7: the 3D points of one row.
+    /// Steps 2 and 5–8: the 3D points of one row.
     row: Vec<[f64; 3]>,
-    /// Steps 4–8: the merge forest, the root of each label, the final label of each root and the roots in
+    /// Steps 4–9: the merge forest, the root of each label, the final label of each root and the roots in
     /// order of first pixel.
     parent: Vec<u32>,
     root: Vec<u32>,
