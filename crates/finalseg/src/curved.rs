@@ -46,14 +46,16 @@ pub(crate) struct Buffers {
 /// Merges, in `parent` (the forest over the labels of `labels`, whose pixels carry their groups' roots), adjacent
 /// groups whose union one quadric explains (module doc), passes over the sorted adjacent pairs until none merges;
 /// `moments` and `planes` (per label at `l − 1`: the core moments and planes the output reports) are merged and
-/// refitted as step 4 does; `all` (per label at `l − 1`) holds the moments of each label over all of its pixels, which
-/// the tests use. Candidates are the pairs whose reported planes are within the angle; a pair is tested again only
+/// refitted as step 4 does; `all` (per label at `l − 1`) holds the moments of each label over all of its pixels less
+/// the points of the pixels listed with their labels beside it (those the outlier step released since), which the
+/// tests use. Candidates are the pairs whose reported planes are within the angle; a pair is tested again only
 /// once a merge has changed one of its groups. Returns the number of merges.
 pub(crate) fn merge_curved(
     scene: &Scene<'_>,
     labels: &[u32],
     parent: &mut [u32],
-    (moments, planes, all): (&mut [Moments], &mut [Plane], &[Moments]),
+    (moments, planes): (&mut [Moments], &mut [Plane]),
+    (all, released): (&[Moments], &[(u32, u32)]),
     (ratio, max_angle_deg, max_rms): (f64, f64, f64),
     (bufs, room): (&mut Buffers, usize),
 ) -> u32 {
@@ -97,6 +99,11 @@ pub(crate) fn merge_curved(
     // Each label's moments over all of its pixels now (not only its core pixels): the pixels the test sums.
     bufs.moments.push(Moments::default());
     bufs.moments.extend_from_slice(&all[..n - 1]);
+    for &(i, l) in released {
+        if let Some(p) = scene.point(i as usize % w, i as usize / w) {
+            bufs.moments[l as usize].remove(p);
+        }
+    }
     bufs.sse.extend(
         bufs.moments
             .iter()
@@ -311,12 +318,13 @@ mod tests {
         let mut planes: Vec<Plane> = moments.iter().map(|m| fit_plane(m, &camera)).collect();
         let mut parent = vec![0, 1, 2];
         // Every pixel is a core pixel here: the moments over all pixels are the core moments.
-        let all = moments.clone();
+        let all = (moments.clone(), Vec::new());
         let n = merge_curved(
             &scene,
             &labels,
             &mut parent,
-            (&mut moments, &mut planes, &all),
+            (&mut moments, &mut planes),
+            (&all.0, &all.1),
             (ratio, 15.0, 3.0),
             (&mut Buffers::default(), 16),
         );

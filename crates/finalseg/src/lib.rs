@@ -248,11 +248,17 @@ pub fn segment_into(
     if params.curved_merge_ratio > 0.0 && guide.is_some() {
         carry_roots(parent, root, &mut pieces.comp);
         let limits = (params.curved_merge_ratio, params.curved_max_angle_deg, params.merge_max_residual);
-        // The moments of every label over all of its pixels as they now are (the refit's sums).
-        refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
-        let fits = (&mut pieces.moments[..], &mut pieces.planes[..], rbufs.moments());
+        // The moments of every label over all of its pixels: step 7's refit less the pixels it released, or a refit.
+        let released: &[(u32, u32)] = if params.outlier_scales > 0.0 {
+            obufs.released()
+        } else {
+            refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            &[]
+        };
+        let fits = (&mut pieces.moments[..], &mut pieces.planes[..]);
         let room = (w * h) / (params.min_region_px.max(1) as usize) + 1;
-        let n = curved::merge_curved(&scene, &pieces.comp, parent, fits, limits, (cvbufs, room));
+        let all = (rbufs.moments(), released);
+        let n = curved::merge_curved(&scene, &pieces.comp, parent, fits, all, limits, (cvbufs, room));
         tracing::debug!(merges = n, "curved merges");
     }
 

@@ -19,6 +19,15 @@ pub(crate) struct Buffers {
     /// The flood fill's stack and the group it gathers.
     stack: Vec<u32>,
     group: Vec<u32>,
+    /// The pixels the last call released, each with the label it had.
+    released: Vec<(u32, u32)>,
+}
+
+impl Buffers {
+    /// The pixels the last [`release`] left unlabelled, each with the label it had, in the order released.
+    pub(crate) fn released(&self) -> &[(u32, u32)] {
+        &self.released
+    }
 }
 
 /// Leaves unlabelled (0) the pixels of `groups` (a label per pixel, 0 = none; `planes[l − 1]` is the plane of
@@ -34,7 +43,7 @@ pub(crate) fn release(
     (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
 ) -> usize {
     let (w, h) = (scene.w, scene.h);
-    let Buffers { state, outliers, stack, group } = bufs;
+    let Buffers { state, outliers, stack, group, released: freed } = bufs;
     state.clear();
     state.resize(w * h, 0);
     // Room for every pixel once, reserved once, so later frames reuse the memory.
@@ -42,6 +51,8 @@ pub(crate) fn release(
         v.clear();
         v.reserve(w * h);
     }
+    freed.clear();
+    freed.reserve(w * h);
     // Compiled for the best instruction set of this CPU, so each row's points are computed several at a time (the
     // same bits on every one).
     isa::dispatch(
@@ -102,6 +113,7 @@ pub(crate) fn release(
             released += group.len();
             for &i in group.iter() {
                 groups[i as usize] = 0;
+                freed.push((i, l));
             }
         }
     }
@@ -138,7 +150,16 @@ mod tests {
             moments[l as usize - 1].add(scene.point(i % w, i / w).unwrap());
         }
         let planes = moments.map(|m| fit_plane(&m, &camera));
-        let n = release(&scene, &mut groups, &planes, (2.5, 10), (&mut Buffers::default(), &mut Vec::new()));
+        let before = groups.clone();
+        let mut bufs = Buffers::default();
+        let n = release(&scene, &mut groups, &planes, (2.5, 10), (&mut bufs, &mut Vec::new()));
+        // The released list names exactly the pixels left unlabelled, each with the label it had.
+        let mut freed: Vec<(u32, u32)> =
+            (0..w * h).filter(|&i| groups[i] == 0 && before[i] != 0).map(|i| (i as u32, before[i])).collect();
+        let mut listed = bufs.released().to_vec();
+        freed.sort_unstable();
+        listed.sort_unstable();
+        assert_eq!(listed, freed);
         (groups, n)
     }
 

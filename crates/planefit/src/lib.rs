@@ -52,6 +52,22 @@ impl Moments {
         self.ss[5] += z * z;
     }
 
+    /// Removes one point that was added (the sums less its terms; not the bits a sum without it would give).
+    #[inline]
+    pub fn remove(&mut self, p: [f64; 3]) {
+        let [x, y, z] = p;
+        self.n -= 1.0;
+        self.s[0] -= x;
+        self.s[1] -= y;
+        self.s[2] -= z;
+        self.ss[0] -= x * x;
+        self.ss[1] -= x * y;
+        self.ss[2] -= x * z;
+        self.ss[3] -= y * y;
+        self.ss[4] -= y * z;
+        self.ss[5] -= z * z;
+    }
+
     /// Adds the moments of a disjoint set (`self` first, so the sum order is fixed).
     pub fn merge(&mut self, o: &Moments) {
         self.n += o.n;
@@ -117,6 +133,19 @@ pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn removing_points_gives_the_moments_of_the_rest() {
+        let pts: Vec<[f64; 3]> = (0..50).map(f64::from).map(|t| [t, 0.5 * t * t, 3.0 - t]).collect();
+        let (mut all, mut rest) = (Moments::default(), Moments::default());
+        pts.iter().for_each(|&p| all.add(p));
+        pts[10..].iter().for_each(|&p| rest.add(p));
+        pts[..10].iter().for_each(|&p| all.remove(p));
+        assert_eq!(all.n, rest.n);
+        for (a, b) in all.s.iter().chain(&all.ss).zip(rest.s.iter().chain(&rest.ss)) {
+            assert_relative_eq!(a, b, max_relative = 1e-12);
+        }
+    }
 
     #[test]
     fn axes_of_a_tilted_plane() {
