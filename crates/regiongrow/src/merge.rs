@@ -341,107 +341,94 @@ pub(crate) fn merge<const N: usize>(
     toward: &dyn Fn([f64; 3]) -> [f64; 3],
     bufs: &mut MergeBufs,
 ) -> Merged {
+    // Compiled for the best instruction set of this CPU (the same operations in the same order: the same bits).
     isa::dispatch(
         #[inline(always)]
-        || merge_body(labels, max_label, width, eight, pts, k, params, min_keep, toward, bufs),
+        || {
+            let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, map, .. } = bufs;
+            region_stats_into(labels, max_label, pts, k, stats);
+            let crit = Criterion::new(params);
+            let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
+            planes.clear();
+            planes.extend(stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }));
+            parent.clear();
+            parent.extend(0..=max_label);
+            changed.clear();
+            changed.resize(max_label as usize + 1, false);
+            adjacent_pairs_into(labels, width, eight, pairs);
+            graph.clear();
+            graph.extend(pairs.iter().map(|&p| (p, None)));
+
+            let mut n_merged = 0;
+            let mut n_passes = 0;
+            loop {
+                n_passes += 1;
+                cand.clear();
+                // At the start of a pass every pair holds two distinct roots (the first pass: every label is one).
+                for ((a, b), known) in graph.iter_mut() {
+                    let (a, b) = (*a, *b);
+                    debug_assert!(a != b && parent[a as usize] == a && parent[b as usize] == b);
+                    let (sa, sb) = (&stats[a as usize], &stats[b as usize]);
+                    let score = *known.get_or_insert_with(|| {
+                        crit.score(sa, planes[a as usize].as_ref(), sb, planes[b as usize].as_ref())
+                    });
+                    if let Some(s) = score {
+                        let (lo, hi) = if sa.first < sb.first { (a, b) } else { (b, a) };
+                        cand.push((s, stats[lo as usize].first, stats[hi as usize].first, lo, hi));
+                    }
+                }
+                if cand.is_empty() {
+                    break;
+                }
+                cand.sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
+                cand.dedup_by(|p, q| p.1 == q.1 && p.2 == q.2);
+                let mut merged_now = false;
+                for &(_, _, _, a, b) in cand.iter() {
+                    let (ra, rb) = (find(parent, a), find(parent, b));
+                    if ra == rb {
+                        continue;
+                    }
+                    // Both still the regions this pass scored (roots, unchanged): the score is the one found above.
+                    let same = ra == a && rb == b && !changed[a as usize] && !changed[b as usize];
+                    let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
+                    if !same
+                        && crit
+                            .score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref())
+                            .is_none()
+                    {
+                        continue;
+                    }
+                    let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
+                    let u = stats[lo as usize].combined(&stats[hi as usize]);
+                    stats[lo as usize] = u;
+                    planes[lo as usize] = fit(&u);
+                    parent[hi as usize] = lo;
+                    changed[lo as usize] = true;
+                    n_merged += 1;
+                    merged_now = true;
+                }
+                if !merged_now {
+                    break;
+                }
+                // Shrink the graph to root pairs for the next pass; a pair keeps its score when both its regions are
+                // unchanged roots (a pair that maps onto another one always has a changed region, so duplicates
+                // carry no score).
+                for (p, known) in graph.iter_mut() {
+                    let (ra, rb) = (find(parent, p.0), find(parent, p.1));
+                    if ra != p.0 || rb != p.1 || changed[ra as usize] || changed[rb as usize] {
+                        *known = None;
+                    }
+                    *p = (ra.min(rb), ra.max(rb));
+                }
+                graph.retain(|(p, _)| p.0 != p.1);
+                graph.sort_unstable_by_key(|e| e.0);
+                graph.dedup_by_key(|e| e.0);
+                changed.fill(false);
+            }
+            rewrite(labels, max_label, min_keep, (stats, parent, map));
+            Merged { n_merged, n_passes }
+        },
     )
-}
-
-/// [`merge`]'s work, inlined into its `isa::dispatch`.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn merge_body<const N: usize>(
-    labels: &mut [u32],
-    max_label: u32,
-    width: usize,
-    eight: bool,
-    pts: &[[f32; N]],
-    k: &[f32],
-    params: &Params,
-    min_keep: u32,
-    toward: &dyn Fn([f64; 3]) -> [f64; 3],
-    bufs: &mut MergeBufs,
-) -> Merged {
-    let MergeBufs { stats, planes, parent, pairs, graph, changed, cand, map, .. } = bufs;
-    region_stats_into(labels, max_label, pts, k, stats);
-    let crit = Criterion::new(params);
-    let fit = |s: &Stats| if crit.paper { None } else { Plane::fit(&s.mom, toward) };
-    planes.clear();
-    planes.extend(stats.iter().map(|s| if s.count > 0 { fit(s) } else { None }));
-    parent.clear();
-    parent.extend(0..=max_label);
-    changed.clear();
-    changed.resize(max_label as usize + 1, false);
-    adjacent_pairs_into(labels, width, eight, pairs);
-    graph.clear();
-    graph.extend(pairs.iter().map(|&p| (p, None)));
-
-    let mut n_merged = 0;
-    let mut n_passes = 0;
-    loop {
-        n_passes += 1;
-        cand.clear();
-        // At the start of a pass every pair holds two distinct roots (the first pass: every label is one).
-        for ((a, b), known) in graph.iter_mut() {
-            let (a, b) = (*a, *b);
-            debug_assert!(a != b && parent[a as usize] == a && parent[b as usize] == b);
-            let (sa, sb) = (&stats[a as usize], &stats[b as usize]);
-            let score = *known.get_or_insert_with(|| {
-                crit.score(sa, planes[a as usize].as_ref(), sb, planes[b as usize].as_ref())
-            });
-            if let Some(s) = score {
-                let (lo, hi) = if sa.first < sb.first { (a, b) } else { (b, a) };
-                cand.push((s, stats[lo as usize].first, stats[hi as usize].first, lo, hi));
-            }
-        }
-        if cand.is_empty() {
-            break;
-        }
-        cand.sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)).then(p.2.cmp(&q.2)));
-        cand.dedup_by(|p, q| p.1 == q.1 && p.2 == q.2);
-        let mut merged_now = false;
-        for &(_, _, _, a, b) in cand.iter() {
-            let (ra, rb) = (find(parent, a), find(parent, b));
-            if ra == rb {
-                continue;
-            }
-            // Both still the regions this pass scored (roots, unchanged): the score is the one found above.
-            let same = ra == a && rb == b && !changed[a as usize] && !changed[b as usize];
-            let (sa, sb) = (&stats[ra as usize], &stats[rb as usize]);
-            if !same
-                && crit.score(sa, planes[ra as usize].as_ref(), sb, planes[rb as usize].as_ref()).is_none()
-            {
-                continue;
-            }
-            let (lo, hi) = if sa.first < sb.first { (ra, rb) } else { (rb, ra) };
-            let u = stats[lo as usize].combined(&stats[hi as usize]);
-            stats[lo as usize] = u;
-            planes[lo as usize] = fit(&u);
-            parent[hi as usize] = lo;
-            changed[lo as usize] = true;
-            n_merged += 1;
-            merged_now = true;
-        }
-        if !merged_now {
-            break;
-        }
-        // Shrink the graph to root pairs for the next pass; a pair keeps its score when both its regions are
-        // unchanged roots (a pair that maps onto another one always has a changed region, so duplicates
-        // carry no score).
-        for (p, known) in graph.iter_mut() {
-            let (ra, rb) = (find(parent, p.0), find(parent, p.1));
-            if ra != p.0 || rb != p.1 || changed[ra as usize] || changed[rb as usize] {
-                *known = None;
-            }
-            *p = (ra.min(rb), ra.max(rb));
-        }
-        graph.retain(|(p, _)| p.0 != p.1);
-        graph.sort_unstable_by_key(|e| e.0);
-        graph.dedup_by_key(|e| e.0);
-        changed.fill(false);
-    }
-    rewrite(labels, max_label, min_keep, (stats, parent, map));
-    Merged { n_merged, n_passes }
 }
 
 /// The end of [`merge`]: every label's root once into `parent` (label 0 is its own root) and the label it becomes
