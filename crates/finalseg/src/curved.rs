@@ -11,6 +11,7 @@
 //! and at most `max_rms`. A test relative to the noise cannot see steps under about twice the noise; they merge.
 
 use crate::Scene;
+use crate::merge::differing_pairs;
 use crate::plane::{Plane, fit_plane};
 use crate::refine::SIGMA_FLOOR;
 use nalgebra::{Matrix6, Vector6};
@@ -64,9 +65,10 @@ pub(crate) fn merge_curved(
     bufs.reserve(labels.len(), room);
     // The adjacent pairs whose reported planes (of their core pixels) are within the angle: the candidates.
     let mut last = (0, 0);
-    let mut push = |a: u32, b: u32| {
+    differing_pairs(labels, w, scene.h, |i, j| {
+        let (a, b) = (labels[i], labels[j]);
         // Runs along a border repeat one pair: pushed once per run.
-        if a != b && a != 0 && b != 0 && (a.min(b), a.max(b)) != last {
+        if a != 0 && b != 0 && (a.min(b), a.max(b)) != last {
             last = (a.min(b), a.max(b));
             if bufs.pairs.len() == bufs.pairs.capacity() {
                 // Full: the distinct pairs make room before the list grows.
@@ -75,18 +77,7 @@ pub(crate) fn merge_curved(
             }
             bufs.pairs.push(last);
         }
-    };
-    for y in 0..scene.h {
-        let here = &labels[y * w..(y + 1) * w];
-        for (&a, &b) in here.iter().zip(&here[1..]) {
-            push(a, b);
-        }
-        if let Some(below) = labels.get((y + 1) * w..(y + 2) * w) {
-            for (&a, &b) in here.iter().zip(below) {
-                push(a, b);
-            }
-        }
-    }
+    });
     bufs.pairs.sort_unstable();
     bufs.pairs.dedup();
     let cos_max = max_angle_deg.to_radians().cos();

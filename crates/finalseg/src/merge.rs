@@ -186,6 +186,41 @@ fn near_edges(edges: &EdgeMap, w: usize, h: usize, hor: &mut Vec<bool>, near: &m
     }
 }
 
+/// Calls `f(i, j)` for every pair of 4-adjacent pixels of `labels` (`w` × `h`, row-major) whose labels differ, in
+/// raster order of `i`: each row's pixels with their right neighbours, then with the ones below. Chunks of pairs
+/// that all match are skipped by one test without branches.
+pub(crate) fn differing_pairs(labels: &[u32], w: usize, h: usize, mut f: impl FnMut(usize, usize)) {
+    // Pixel pairs (row + x + d₀, row + x + d₁), x in `xs`, in order.
+    let mut scan = |row: usize, xs: std::ops::Range<usize>, (d0, d1): (usize, usize)| {
+        const CHUNK: usize = 16;
+        let mut x = xs.start;
+        while x + CHUNK <= xs.end {
+            let (a, b) =
+                (&labels[row + x + d0..row + x + d0 + CHUNK], &labels[row + x + d1..row + x + d1 + CHUNK]);
+            if a.iter().zip(b).fold(0u32, |acc, (&p, &q)| acc | (p ^ q)) != 0 {
+                for k in x..x + CHUNK {
+                    if labels[row + k + d0] != labels[row + k + d1] {
+                        f(row + k + d0, row + k + d1);
+                    }
+                }
+            }
+            x += CHUNK;
+        }
+        for k in x..xs.end {
+            if labels[row + k + d0] != labels[row + k + d1] {
+                f(row + k + d0, row + k + d1);
+            }
+        }
+    };
+    for y in 0..h {
+        let row = y * w;
+        scan(row, 0..w.saturating_sub(1), (0, 1));
+        if y + 1 < h {
+            scan(row, 0..w, (0, w));
+        }
+    }
+}
+
 /// Into `out` (reset for the labels of `comp`), the borders between adjacent components of `comp`, with their
 /// support by `near` and, with `gaps`, their gaps to the components' `planes` (`planes[l − 1]` for label `l`);
 /// with `close` (the region-growing label of each component), also the pairs of [`close_pairs_into`]; the pairs
@@ -206,7 +241,7 @@ fn borders_into(
     let mut last = ((0u32, 0u32), 0usize);
     let mut add = |i: usize, j: usize| {
         let (a, b) = (comp[i], comp[j]);
-        if a != 0 && b != 0 && a != b {
+        if a != 0 && b != 0 {
             let key = (a.min(b), a.max(b));
             if key != last.0 {
                 last = (key, out.index(key));
@@ -219,37 +254,7 @@ fn borders_into(
             }
         }
     };
-    // Pixel pairs (row + x + d₀, row + x + d₁), x in `xs`, in order; chunks of pairs that all match are skipped
-    // by one test without branches.
-    let mut scan = |row: usize, xs: std::ops::Range<usize>, (d0, d1): (usize, usize)| {
-        const CHUNK: usize = 16;
-        let mut x = xs.start;
-        while x + CHUNK <= xs.end {
-            let (a, b) =
-                (&comp[row + x + d0..row + x + d0 + CHUNK], &comp[row + x + d1..row + x + d1 + CHUNK]);
-            if a.iter().zip(b).fold(0u32, |acc, (&p, &q)| acc | (p ^ q)) != 0 {
-                for k in x..x + CHUNK {
-                    if comp[row + k + d0] != comp[row + k + d1] {
-                        add(row + k + d0, row + k + d1);
-                    }
-                }
-            }
-            x += CHUNK;
-        }
-        for k in x..xs.end {
-            if comp[row + k + d0] != comp[row + k + d1] {
-                add(row + k + d0, row + k + d1);
-            }
-        }
-    };
-    for y in 0..h {
-        let row = y * w;
-        // Each pixel with its right neighbour, then with the one below.
-        scan(row, 0..w.saturating_sub(1), (0, 1));
-        if y + 1 < h {
-            scan(row, 0..w, (0, w));
-        }
-    }
+    differing_pairs(comp, w, h, &mut add);
     if let Some((guide, r, bufs)) = close {
         close_pairs_into((comp, scene.range), guide, (w, h, r), bufs, out);
     }
@@ -509,6 +514,46 @@ mod tests {
                     assert_eq!(near[y * w + x], want, "case {case} ({w}×{h}) at ({x}, {y})");
                 }
             }
+        }
+    }
+
+    /// The chunked scan gives every differing 4-adjacent pair once, in its documented order (each row's right pairs,
+    /// then its pairs below), on random block images wider and narrower than a chunk.
+    #[test]
+    fn differing_pairs_lists_every_differing_pair_in_order() {
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(31);
+        for case in 0..200 {
+            let (w, h) = (rng.random_range(1..80usize), rng.random_range(1..30usize));
+            let bw = rng.random_range(1..40usize);
+            let noise = [0.0, 0.02, 0.3][case % 3];
+            let labels: Vec<u32> =
+                (0..w * h)
+                    .map(|i| {
+                        if rng.random_bool(noise) {
+                            rng.random_range(0..4)
+                        } else {
+                            ((i % w) / bw) as u32 % 3
+                        }
+                    })
+                    .collect();
+            let mut want = Vec::new();
+            for y in 0..h {
+                for x in 0..w.saturating_sub(1) {
+                    let i = y * w + x;
+                    if labels[i] != labels[i + 1] {
+                        want.push((i, i + 1));
+                    }
+                }
+                for x in 0..w {
+                    let i = y * w + x;
+                    if y + 1 < h && labels[i] != labels[i + w] {
+                        want.push((i, i + w));
+                    }
+                }
+            }
+            let mut got = Vec::new();
+            differing_pairs(&labels, w, h, |i, j| got.push((i, j)));
+            assert_eq!(got, want, "case {case}");
         }
     }
 
