@@ -474,11 +474,24 @@ fn rewrite(
 fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Vec<(u32, u32)>) {
     let height = labels.len().checked_div(width).unwrap_or(0);
     pairs.clear();
+    // The pairs pushed lately, direct-mapped by key: a border repeats its pair pixel after pixel, and a repeat
+    // found here is not pushed (the list is sorted and deduplicated at the end, so only its length changes).
+    let recent = &mut [0u64; 64];
+    #[inline(always)]
+    fn put(pairs: &mut Vec<(u32, u32)>, recent: &mut [u64; 64], a: u32, b: u32) {
+        let (lo, hi) = (a.min(b), a.max(b));
+        let key = (u64::from(lo) << 32) | u64::from(hi);
+        let slot = &mut recent[(key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 58) as usize];
+        if *slot != key {
+            *slot = key;
+            pairs.push((lo, hi));
+        }
+    }
     // Pairs of one pixel `x` of `row` with its right and lower (and lower diagonal) neighbours.
-    let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>| {
+    let scan = |row: &[u32], below: &[u32], x: usize, pairs: &mut Vec<(u32, u32)>, recent: &mut [u64; 64]| {
         let mut push = |a: u32, b: u32| {
             if a != 0 && b != 0 && a != b {
-                pairs.push((a.min(b), a.max(b)));
+                put(pairs, recent, a, b);
             }
         };
         let a = row[x];
@@ -523,15 +536,14 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        let (p, q) = (r[k], other[k]);
-                        pairs.push((p.min(q), p.max(q)));
+                        put(pairs, recent, r[k], other[k]);
                     }
                 }
                 x += CHUNK;
             }
         }
         for xx in x..width {
-            scan(row, below, xx, pairs);
+            scan(row, below, xx, pairs, recent);
         }
     }
     // The order of the tuples, compared as one integer.
