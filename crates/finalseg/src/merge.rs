@@ -526,16 +526,10 @@ mod tests {
             let (w, h) = (rng.random_range(1..80usize), rng.random_range(1..30usize));
             let bw = rng.random_range(1..40usize);
             let noise = [0.0, 0.02, 0.3][case % 3];
-            let labels: Vec<u32> =
-                (0..w * h)
-                    .map(|i| {
-                        if rng.random_bool(noise) {
-                            rng.random_range(0..4)
-                        } else {
-                            ((i % w) / bw) as u32 % 3
-                        }
-                    })
-                    .collect();
+            let block = |i: usize| ((i % w) / bw) as u32 % 3;
+            let labels: Vec<u32> = (0..w * h)
+                .map(|i| if rng.random_bool(noise) { rng.random_range(0..4) } else { block(i) })
+                .collect();
             let mut want = Vec::new();
             for y in 0..h {
                 for x in 0..w.saturating_sub(1) {

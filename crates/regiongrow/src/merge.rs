@@ -477,6 +477,7 @@ fn adjacent_pairs_into(labels: &[u32], width: usize, eight: bool, pairs: &mut Ve
     // The pairs pushed lately, direct-mapped by key: a border repeats its pair pixel after pixel, and a repeat
     // found here is not pushed (the list is sorted and deduplicated at the end, so only its length changes).
     let recent = &mut [0u64; 64];
+    /// Pushes pair (a, b), smaller label first, unless `recent` holds it.
     #[inline(always)]
     fn put(pairs: &mut Vec<(u32, u32)>, recent: &mut [u64; 64], a: u32, b: u32) {
         let (lo, hi) = (a.min(b), a.max(b));
