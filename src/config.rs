@@ -134,6 +134,7 @@ impl Config {
         c.segment.outlier_scales = 0.0;
         c.segment.curved_merge_ratio = 0.0;
         c.segment.bend_max_angle_deg = 0.0;
+        c.segment.terrace_gap_steps = 0.0;
         c.segment.within_joint_rms_ratio = 0.0;
         c.segment.within_close_px = 0;
         c
@@ -472,6 +473,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.bend_fit_ratio",
         "Regions mode: a sharper bend still merges if the joint plane fits each region within this × the larger region RMS (0 = off).",
+    ),
+    (
+        "segment.terrace_gap_steps",
+        "Regions mode, stepped depth: a bend next to a single terrace (RMS under half a step's rounding error) allows this many steps more border gap (0 = off).",
     ),
     (
         "segment.crease_passes",

@@ -101,13 +101,13 @@ struct PlaneTest {
 /// Union-find merging of adjacent components of `pieces` over borders weakly supported by
 /// `edges` or, with `merge_within_region`, inside one region-growing region. `parent` is the
 /// union-find forest over labels `0..=n`; roots are the smaller label, and the root's moments and
-/// plane become the merged group's.
+/// plane become the merged group's. `step_3d` is the 3D length of the depth's step, if it has one.
 pub(crate) fn merge_unsupported(
     scene: &Scene<'_>,
     edges: &EdgeMap,
     pieces: &mut Pieces,
     parent: &mut [u32],
-    params: &Params,
+    (params, step_3d): (&Params, Option<f64>),
     bufs: &mut Buffers,
 ) {
     let Buffers { hor, near, borders, candidates, close } = bufs;
@@ -122,7 +122,8 @@ pub(crate) fn merge_unsupported(
         close,
     ));
     borders_into(scene, &pieces.comp, near, (&pieces.planes, bends), close, borders);
-    candidates_into(borders, (&pieces.guide, &pieces.planes), params, candidates);
+    let components = (&pieces.guide[..], &pieces.planes[..], &pieces.moments[..]);
+    candidates_into(borders, components, (params, step_3d), candidates);
     let test = PlaneTest {
         cos_max: params.merge_max_angle_deg.to_radians().cos(),
         r2: params.merge_max_residual * params.merge_max_residual,
@@ -319,20 +320,38 @@ fn close_pairs_into(
     }
 }
 
+/// A component whose depths spread (standard deviation along the camera's depth axis) by less than this share of
+/// the rounding error of the depth's step (`|Δq| / √12`) holds one depth value: a terrace of a quantised slope, whose
+/// plane is the terrace, not the surface.
+const TERRACE_SPREAD_SHARE: f64 = 0.5;
+
+/// Whether the points of moments `m` are one terrace of depth rounded to steps of 3D length `step_3d`: their spread
+/// along the depth axis (the third coordinate of every camera: Z, or the grid's value) is below
+/// [`TERRACE_SPREAD_SHARE`] of the step's rounding error.
+fn is_terrace(m: &Moments, step_3d: f64) -> bool {
+    let limit = TERRACE_SPREAD_SHARE * step_3d / 12f64.sqrt();
+    m.n >= 3.0 && m.covariance_rows()[2][2] < limit * limit
+}
+
 /// Candidates: weakly supported borders, and (with `merge_within_region`) any border between two
 /// pieces of one region-growing region (`comp_guide[l − 1]` is the region-growing label of `l`).
 /// Into `out`, whose memory is reused.
 /// With `bend_max_angle_deg` > 0, also any border whose mean gap is below `bend_max_gap` times the larger RMS
-/// residual of the two components (`planes[l − 1]` is the plane of `l`).
+/// residual of the two components (`planes[l − 1]` is the plane of `l`, `moments[l − 1]` its points' moments), plus
+/// `terrace_gap_steps` times `step_3d` (the 3D length of the depth's step, if it has one) where one of them is a
+/// single terrace ([`is_terrace`]).
 fn candidates_into(
     borders: &Borders,
-    (comp_guide, planes): (&[u32], &[Plane]),
-    params: &Params,
+    (comp_guide, planes, moments): (&[u32], &[Plane], &[Moments]),
+    (params, step_3d): (&Params, Option<f64>),
     out: &mut Candidates,
 ) {
     let Candidates { pairs, kinds } = out;
     pairs.clear();
     kinds.clear();
+    // (The step, the extra gap allowed beside a terrace); none without a step.
+    let terrace =
+        step_3d.filter(|_| params.terrace_gap_steps > 0.0).map(|q| (q, params.terrace_gap_steps * q));
     for &((a, b), ref border) in &borders.entries {
         let n = f64::from(border.n);
         let weak = f64::from(border.near) < params.min_border_support * n;
@@ -341,7 +360,11 @@ fn candidates_into(
             g != 0 && g == comp_guide[b as usize - 1]
         };
         let scatter = planes[a as usize - 1].rms.max(planes[b as usize - 1].rms);
-        let bend = params.bend_max_angle_deg > 0.0 && border.gap < params.bend_max_gap * scatter * n;
+        let beside_terrace =
+            |q| is_terrace(&moments[a as usize - 1], q) || is_terrace(&moments[b as usize - 1], q);
+        let extra = terrace.map_or(0.0, |(q, gap)| if beside_terrace(q) { gap } else { 0.0 });
+        let bend =
+            params.bend_max_angle_deg > 0.0 && border.gap < (params.bend_max_gap * scatter + extra) * n;
         if weak || same_region || bend {
             pairs.push((a, b));
             kinds.push(Kind { agree: (weak || same_region).then_some(weak), bend });
@@ -515,6 +538,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A border a mean gap of 1.6 × the larger RMS from the other plane is no bend candidate (the limit is 1.5 ×),
+    /// unless the depth has a step and one of the two regions is a single terrace of it (its depths spread by under
+    /// half the step's rounding error): then the gap may be one step more.
+    #[test]
+    fn a_terrace_may_meet_its_slope_on_a_riser() {
+        let params = Params { min_border_support: 0.0, merge_within_region: false, ..Params::default() };
+        let plane = |rms: f64| Plane { normal: [0.0, 0.0, 1.0], offset: -100.0, rms };
+        // 100 points whose depth alternates by ± `spread` about 100 (standard deviation `spread`).
+        let points = |spread: f64| {
+            let mut m = Moments::default();
+            for i in 0..100 {
+                m.add([
+                    f64::from(i % 10),
+                    f64::from(i / 10),
+                    100.0 + if i % 2 == 0 { spread } else { -spread },
+                ]);
+            }
+            m
+        };
+        let candidate = |spread_a: f64, gap: f64, step_3d: Option<f64>, terrace_gap_steps: f64| {
+            let borders = Borders {
+                entries: vec![((1, 2), Border { n: 100, near: 100, gap: gap * 100.0 })],
+                head: Vec::new(),
+                next: Vec::new(),
+            };
+            let mut out = Candidates::default();
+            let params = Params { terrace_gap_steps, ..params.clone() };
+            let (planes, moments) = ([plane(0.0), plane(1.0)], [points(spread_a), points(2.0)]);
+            candidates_into(&borders, (&[0, 0], &planes, &moments), (&params, step_3d), &mut out);
+            out.pairs == [(1, 2)] && out.kinds[0].bend
+        };
+        // Step 3.6: rounding error 3.6 / √12 ≈ 1.04, a terrace under 0.52.
+        assert!(candidate(0.0, 1.4, None, 1.0), "within bend_max_gap × scatter");
+        assert!(!candidate(0.0, 1.6, None, 1.0), "no step: no terrace");
+        assert!(candidate(0.0, 1.6, Some(3.6), 1.0), "a terrace beside its slope");
+        assert!(candidate(0.3, 5.0, Some(3.6), 1.0), "up to 1.5 + 3.6");
+        assert!(!candidate(0.3, 5.2, Some(3.6), 1.0), "beyond 1.5 + 3.6");
+        assert!(!candidate(0.6, 1.6, Some(3.6), 1.0), "a spread of 0.6 is no terrace");
+        assert!(!candidate(0.0, 1.6, Some(3.6), 0.0), "terrace_gap_steps 0: off");
     }
 
     /// The chunked scan gives every differing 4-adjacent pair once, in its documented order (each row's right pairs,

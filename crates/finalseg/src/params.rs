@@ -92,6 +92,11 @@ pub struct Params {
     /// this multiple of the larger of their own RMS residuals (the regions' own normals are unreliable:
     /// thin terraces of a quantised slope); 0 = off.
     pub bend_fit_ratio: f64,
+    /// `regions` mode, `bend_max_angle_deg` > 0, depth rounded to steps: when one of two adjacent regions is a single
+    /// terrace (its RMS below half the rounding error of one step, `|Δq| / √12`, with `|Δq|` the step's 3D length at
+    /// the image centre), their border may lie this many steps `|Δq|` farther (mean gap) from the other's plane than
+    /// `bend_max_gap` allows: a terrace meets the next piece of its slope on a riser (0 = off).
+    pub terrace_gap_steps: f64,
     /// Passes placing the pixels beside a crease (0 = off): where two adjacent regions meet at a crease (their
     /// normals more than `crease_min_angle_deg` apart, each region behind the other's plane or each in front), a
     /// border pixel within the noise of both planes goes to the region whose plane its line of sight sees (at a
@@ -138,6 +143,7 @@ impl Default for Params {
             bend_max_angle_deg: 30.0,
             bend_max_gap: 1.5,
             bend_fit_ratio: 2.0,
+            terrace_gap_steps: 1.0,
             crease_passes: 3,
             crease_min_angle_deg: 20.0,
             band_max_angle_deg: 45.0,
@@ -167,6 +173,7 @@ impl Params {
         ParamError::in_range("segment.bend_max_angle_deg", self.bend_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
         ParamError::at_least("segment.bend_fit_ratio", self.bend_fit_ratio, 0.0)?;
+        ParamError::at_least("segment.terrace_gap_steps", self.terrace_gap_steps, 0.0)?;
         ParamError::in_range("segment.crease_min_angle_deg", self.crease_min_angle_deg, 0.0, 90.0)?;
         ParamError::in_range("segment.band_max_angle_deg", self.band_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.outlier_scales", self.outlier_scales, 0.0)?;

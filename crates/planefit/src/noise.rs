@@ -219,6 +219,35 @@ pub fn step_from_smallest(range: &rangeimage::RangeImage, stride: usize, smalles
     if is_step(range, stride, smallest) { Some(smallest) } else { near_uniform_step(range, stride, smallest) }
 }
 
+/// The 3D length of a depth step of `step` units and the 3D distance between horizontally neighbouring pixels (the
+/// pitch), at the image centre and the image's mean depth value (over every 16th pixel of every 16th row); `None`
+/// without data, or where the camera gives no point there, a length that is not finite or a pitch of 0.
+#[must_use]
+pub fn step_geometry(
+    range: &rangeimage::RangeImage,
+    camera: &rangeimage::Camera,
+    step: f64,
+) -> Option<(f64, f64)> {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let (mut sum, mut n) = (0.0, 0u32);
+    for row in range.as_slice().chunks_exact(w.max(1)).step_by(16) {
+        for &v in row.iter().step_by(16).filter(|v| v.is_finite()) {
+            sum += f64::from(v);
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n));
+    let (p0, right, deeper) =
+        (camera.point(x, y, v)?, camera.point(x + 1.0, y, v)?, camera.point(x, y, v + step)?);
+    let dist =
+        |a: [f64; 3]| ((a[0] - p0[0]).powi(2) + (a[1] - p0[1]).powi(2) + (a[2] - p0[2]).powi(2)).sqrt();
+    let (step_3d, pitch) = (dist(deeper), dist(right));
+    (step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()).then_some((step_3d, pitch))
+}
+
 /// σ as [`estimate`] reads it, from the full 5 × 5 windows whose top-left corner lies on every `stride`-th
 /// row and column (`stride` = 1: every window, as [`estimate`]); NaN when fewer than 20 windows hold data.
 ///
@@ -484,6 +513,22 @@ mod tests {
     use rand::rngs::Xoshiro256PlusPlus;
     use rand::{RngExt, SeedableRng};
     use rangeimage::{Grid, RangeImage};
+
+    #[test]
+    fn step_geometry_measures_a_step_in_3d_at_the_image_centre() {
+        // The grid camera's points are (x, y, value): a step of 2 values is 2 units long, the pitch 1.
+        let img = Grid::new(40, 30, 100.0f32);
+        assert_eq!(step_geometry(&img, &rangeimage::Camera::Grid, 2.0), Some((2.0, 1.0)));
+        // On the ABW camera a step of one stored value is 1.26–1.29 units of Z, the pixels about 0.5 apart.
+        let (step, pitch) =
+            step_geometry(&Grid::new(64, 64, 120.0f32), &rangeimage::Camera::ABW0, 1.0).expect("data");
+        assert!((1.2..1.35).contains(&step) && (0.3..0.8).contains(&pitch), "{step} {pitch}");
+        assert_eq!(
+            step_geometry(&Grid::new(40, 30, f32::NAN), &rangeimage::Camera::Grid, 2.0),
+            None,
+            "no data"
+        );
+    }
 
     #[test]
     fn smallest_step_reads_the_step_of_quantised_depth_only() {

@@ -214,31 +214,11 @@ impl Params {
         }
         // The smallest difference first; whether it is the step (a second pass) only if it would change a limit.
         let Some(step) = planefit::noise::smallest_difference(range, STEP_STRIDE) else { return p };
-        let (w, h) = (range.width() as usize, range.height() as usize);
-        // The mean depth value, from every 16th pixel of every 16th row.
-        let (mut sum, mut n) = (0.0, 0u32);
-        for row in range.as_slice().chunks_exact(w.max(1)).step_by(16) {
-            for &v in row.iter().step_by(16).filter(|v| v.is_finite()) {
-                sum += f64::from(v);
-                n += 1;
-            }
-        }
-        if n == 0 {
-            return p;
-        }
-        let (x, y, v) = ((w / 2) as f64, (h / 2) as f64, sum / f64::from(n));
-        // The step in 3D at the image centre and the tilt of `step_tilt` steps per pixel there.
+        // The step in 3D at the image centre and its mean depth, and the tilt of `step_tilt` steps per pixel there.
         let limits = |step: f64| {
-            let (p0, right, deeper) =
-                (camera.point(x, y, v)?, camera.point(x + 1.0, y, v)?, camera.point(x, y, v + step)?);
-            let dist = |a: [f64; 3]| {
-                ((a[0] - p0[0]).powi(2) + (a[1] - p0[1]).powi(2) + (a[2] - p0[2]).powi(2)).sqrt()
-            };
-            let (step_3d, pitch) = (dist(deeper), dist(right));
-            (step_3d.is_finite() && pitch > 0.0 && pitch.is_finite()).then(|| {
-                let tilt_deg = ((f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees()) as f32;
-                (step_3d, pitch, tilt_deg)
-            })
+            let (step_3d, pitch) = planefit::noise::step_geometry(range, camera, step)?;
+            let tilt_deg = ((f64::from(self.step_tilt) * step_3d / pitch).atan().to_degrees()) as f32;
+            Some((step_3d, pitch, tilt_deg))
         };
         let raises = |(step_3d, _, tilt_deg): (f64, f64, f32)| {
             tilt_deg > p.max_angle_deg || step_3d as f32 > p.max_residual
