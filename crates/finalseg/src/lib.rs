@@ -21,9 +21,6 @@ use planefit::Moments;
 use rangeimage::union_find::find;
 use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 
-/// Every how many rows the depth's step is looked for (as region growing looks for it).
-const STEP_STRIDE: usize = 4;
-
 /// Labels the image from the final edge map `edges` (C = C1 ∪ C2).
 ///
 /// 1. Core pixels: valid pixels farther than `gap_close_px` from every edge pixel (with 0, all
@@ -224,15 +221,10 @@ pub fn segment_into(
     parent.clear();
     parent.extend(0..=pieces.planes.len() as u32);
     if guide.is_some() {
-        // The 3D length of the depth's step (if it has one), for the bends beside a terrace.
+        // The 3D length of the depth's step, for the bends beside a terrace (if a component may be one).
         let step_3d = (params.bend_max_angle_deg > 0.0 && params.terrace_gap_steps > 0.0)
-            .then(|| {
-                planefit::noise::smallest_difference(range, STEP_STRIDE)
-                    .and_then(|d| planefit::noise::step_from_smallest(range, STEP_STRIDE, d))
-                    .and_then(|q| planefit::noise::step_geometry(range, camera, q))
-            })
-            .flatten()
-            .map(|(step_3d, _)| step_3d);
+            .then(|| merge::terrace_step(range, camera, &pieces.moments))
+            .flatten();
         tracing::debug!(?step_3d, "depth step");
         merge::merge_unsupported(&scene, edges, &mut pieces, parent, (params, step_3d), mbufs);
     }

@@ -4,8 +4,8 @@
 use crate::plane::{Plane, fit_plane, mean_sq_residual};
 use crate::{Params, Pieces, Scene};
 use planefit::Moments;
-use rangeimage::EdgeMap;
 use rangeimage::union_find::find;
+use rangeimage::{Camera, EdgeMap, RangeImage};
 
 /// The border between two adjacent components, over 4-adjacencies.
 #[derive(Debug, Clone, Copy, Default)]
@@ -325,6 +325,23 @@ fn close_pairs_into(
 /// plane is the terrace, not the surface.
 const TERRACE_SPREAD_SHARE: f64 = 0.5;
 
+/// Every how many rows [`terrace_step`] looks for the depth's step (as region growing looks for it).
+const STEP_STRIDE: usize = 4;
+
+/// The 3D length of the step of `range`'s depth (`planefit::noise::step_from_smallest`, at the image centre) if the
+/// depth has one and a component (`moments`) may be a terrace of it ([`is_terrace`]); `None` otherwise.
+pub(crate) fn terrace_step(range: &RangeImage, camera: &Camera, moments: &[Moments]) -> Option<f64> {
+    let smallest = planefit::noise::smallest_difference(range, STEP_STRIDE)?;
+    // A step is under twice the smallest difference, so a component is no terrace if it is none of a step that long;
+    // the costlier test of the step itself runs only if one may be.
+    let (longest, _) = planefit::noise::step_geometry(range, camera, 2.0 * smallest)?;
+    if !moments.iter().any(|m| is_terrace(m, longest)) {
+        return None;
+    }
+    let step = planefit::noise::step_from_smallest(range, STEP_STRIDE, smallest)?;
+    planefit::noise::step_geometry(range, camera, step).map(|(step_3d, _)| step_3d)
+}
+
 /// Whether the points of moments `m` are one terrace of depth rounded to steps of 3D length `step_3d`: their spread
 /// along the depth axis (the third coordinate of every camera: Z, or the grid's value) is below
 /// [`TERRACE_SPREAD_SHARE`] of the step's rounding error.
@@ -579,6 +596,29 @@ mod tests {
         assert!(!candidate(0.3, 5.2, Some(3.6), 1.0), "beyond 1.5 + 3.6");
         assert!(!candidate(0.6, 1.6, Some(3.6), 1.0), "a spread of 0.6 is no terrace");
         assert!(!candidate(0.0, 1.6, Some(3.6), 0.0), "terrace_gap_steps 0: off");
+    }
+
+    /// The step is looked for only when a component may be a terrace: a staircase of 2-unit risers every 4 columns
+    /// (enough of them on every 4th row to count as a step) gives its step's 3D length (2 on the grid camera) beside
+    /// a one-value component, nothing beside a spread one or on continuous depth.
+    #[test]
+    fn the_step_is_found_only_beside_a_possible_terrace() {
+        let stairs = rangeimage::Grid::from_fn(80, 60, |x, _| 100.0 + 2.0 * (x / 4) as f32);
+        let moments = |depths: &[f64]| {
+            let mut m = Moments::default();
+            for (i, &z) in depths.iter().enumerate() {
+                m.add([i as f64, 0.0, z]);
+            }
+            m
+        };
+        let (flat, spread) = (moments(&[100.0; 8]), moments(&[100.0, 102.0, 104.0, 106.0]));
+        let grid = rangeimage::Camera::Grid;
+        assert_eq!(terrace_step(&stairs, &grid, &[spread, flat]), Some(2.0));
+        assert_eq!(terrace_step(&stairs, &grid, &[spread]), None, "no component may be a terrace");
+        let slope = rangeimage::Grid::from_fn(40, 30, |x, y| {
+            100.0 + 0.37 * x as f32 + 0.11 * y as f32 + 0.013 * (x * y) as f32
+        });
+        assert_eq!(terrace_step(&slope, &grid, &[flat]), None, "continuous depth has no step");
     }
 
     /// The chunked scan gives every differing 4-adjacent pair once, in its documented order (each row's right pairs,
