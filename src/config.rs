@@ -476,7 +476,7 @@ const KEY_DOCS: &[(&str, &str)] = &[
     ),
     (
         "segment.terrace_gap_steps",
-        "Regions mode, stepped depth: a bend next to a single terrace (RMS under half a step's rounding error) allows this many steps more border gap (0 = off).",
+        "Regions mode, stepped depth: a bend next to a single terrace (depths spread under half a step's rounding error) allows this many steps more border gap (0 = off).",
     ),
     (
         "segment.crease_passes",

@@ -93,9 +93,9 @@ pub struct Params {
     /// thin terraces of a quantised slope); 0 = off.
     pub bend_fit_ratio: f64,
     /// `regions` mode, `bend_max_angle_deg` > 0, depth rounded to steps: when one of two adjacent regions is a single
-    /// terrace (its RMS below half the rounding error of one step, `|Δq| / √12`, with `|Δq|` the step's 3D length at
-    /// the image centre), their border may lie this many steps `|Δq|` farther (mean gap) from the other's plane than
-    /// `bend_max_gap` allows: a terrace meets the next piece of its slope on a riser (0 = off).
+    /// terrace (its depths spread by less than half the rounding error of one step, `|Δq| / √12`, with `|Δq|` the
+    /// step's 3D length at the image centre), their border may lie this many steps `|Δq|` farther (mean gap) from the
+    /// other's plane than `bend_max_gap` allows: a terrace meets the next piece of its slope on a riser (0 = off).
     pub terrace_gap_steps: f64,
     /// Passes placing the pixels beside a crease (0 = off): where two adjacent regions meet at a crease (their
     /// normals more than `crease_min_angle_deg` apart, each region behind the other's plane or each in front), a
