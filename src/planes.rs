@@ -58,7 +58,18 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
 /// [`planes`] once the sizes are checked.
 #[inline(always)] // into `isa::dispatch` in `planes`: compiled for each instruction set
 fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
-    let ids = label_ids(labels);
+    // Sums indexed by the label itself when the labels are at most as many as the pixels (a segmentation's 1..n:
+    // no table of the labels present is built), else by the label's rank among the sorted distinct labels.
+    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    let dense = max <= labels.len();
+    let sparse: Vec<u32> = if dense {
+        Vec::new()
+    } else {
+        let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    };
     let empty = Acc {
         pixels: 0,
         points: 0,
@@ -67,22 +78,9 @@ fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<
         cross: [[0.0; 3]; 3],
         bbox: [u32::MAX, u32::MAX, 0, 0],
     };
-    let mut acc = vec![empty; ids.len()];
-    // Label → index into `ids`: a table when the labels are at most as many as the pixels (a segmentation's
-    // 1..n), else a binary search.
-    let max = ids.last().copied().unwrap_or(0) as usize;
-    let table: Vec<u32> = if max <= labels.len() {
-        let mut t = vec![u32::MAX; max + 1];
-        for (j, &l) in ids.iter().enumerate() {
-            t[l as usize] = j as u32;
-        }
-        t
-    } else {
-        Vec::new()
-    };
-    let index = |l: u32| match table.get(l as usize) {
-        Some(&j) if !table.is_empty() => j as usize,
-        _ => ids.binary_search(&l).expect("every label was collected"),
+    let mut acc = vec![empty; if dense { max + 1 } else { sparse.len() }];
+    let index = |l: u32| {
+        if dense { l as usize } else { sparse.binary_search(&l).expect("every label was collected") }
     };
     // The 3D points of one row at a time.
     let mut row = vec![[0.0f64; 3]; range.width() as usize];
@@ -120,9 +118,11 @@ fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<
         },
     );
 
-    ids.iter()
+    let ids: Vec<u32> = if dense { (0..=max as u32).collect() } else { sparse };
+    ids.into_iter()
         .zip(acc)
-        .map(|(&label, a)| {
+        .filter(|(label, a)| *label != 0 && a.pixels > 0)
+        .map(|(label, a)| {
             let n = a.points as f64;
             let mean = a.sum.map(|s| s / n);
             let centroid = [a.origin[0] + mean[0], a.origin[1] + mean[1], a.origin[2] + mean[2]];
@@ -200,23 +200,6 @@ fn for_runs(
     }
 }
 
-/// The distinct non-zero labels of `labels`, sorted: marked in a table up to the largest label when that is
-/// at most the pixel count (a segmentation's 1..n: one pass, no sort of the pixels), else sorted.
-fn label_ids(labels: &LabelImage) -> Vec<u32> {
-    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
-    if max > labels.len() {
-        let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
-        ids.sort_unstable();
-        ids.dedup();
-        return ids;
-    }
-    let mut seen = vec![false; max + 1];
-    for &l in labels.as_slice() {
-        seen[l as usize] = true;
-    }
-    (1..=max).filter(|&l| seen[l]).map(|l| l as u32).collect()
-}
-
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
@@ -290,6 +273,23 @@ mod tests {
             })
             .collect();
         Grid::from_vec(w, h, data).unwrap()
+    }
+
+    /// The distinct non-zero labels of `labels`, sorted: marked in a table up to the largest label when that is
+    /// at most the pixel count (a segmentation's 1..n: one pass, no sort of the pixels), else sorted.
+    fn label_ids(labels: &LabelImage) -> Vec<u32> {
+        let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+        if max > labels.len() {
+            let mut ids: Vec<u32> = labels.as_slice().iter().copied().filter(|&l| l != 0).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            return ids;
+        }
+        let mut seen = vec![false; max + 1];
+        for &l in labels.as_slice() {
+            seen[l as usize] = true;
+        }
+        (1..=max).filter(|&l| seen[l]).map(|l| l as u32).collect()
     }
 
     /// Per-label sums of the reference fit.
