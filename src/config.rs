@@ -129,6 +129,7 @@ impl Config {
         // The specification fills every left-over pixel.
         c.segment.fill_max_residual = 0.0;
         c.segment.refine_passes = 0;
+        c.segment.refine_steep_cos = 0.0;
         c.segment.crease_passes = 0;
         c.segment.band_max_angle_deg = 0.0;
         c.segment.outlier_scales = 0.0;
@@ -461,6 +462,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "segment.refine_passes",
         "Passes moving border pixels to the adjacent region whose plane fits them better (0 = off).",
+    ),
+    (
+        "segment.refine_steep_cos",
+        "Refinement: a plane seen from a border pixel at a cosine under this has its distances scaled up toward their length along the line of sight (0 = off).",
     ),
     (
         "segment.bend_max_angle_deg",

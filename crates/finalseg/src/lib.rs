@@ -309,11 +309,12 @@ fn place_borders(
         // misplaced pixels had tilted now lets the rest of them go. (The reported planes stay
         // those of the core pixels.)
         let (passes, first) = (params.refine_passes, (&pieces.planes[..], refine::Start::Scan));
-        if refine::refine(scene, &mut pieces.comp, first, limit, passes, rbufs) > 0 {
+        if refine::refine(scene, &mut pieces.comp, first, (limit, params.refine_steep_cos), passes, rbufs) > 0
+        {
             refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
             refit_done = true;
             let second = (&refitted[..], refine::Start::Update);
-            refine::refine(scene, &mut pieces.comp, second, limit, passes, rbufs);
+            refine::refine(scene, &mut pieces.comp, second, (limit, params.refine_steep_cos), passes, rbufs);
         }
     }
 
@@ -336,7 +337,14 @@ fn place_borders(
             // leaking region's tilted plane crossed it are outliers of that region's plane now.
             refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
             let again = (&refitted[..], refine::Start::Scan);
-            refine::refine(scene, &mut pieces.comp, again, limit, params.refine_passes, rbufs);
+            refine::refine(
+                scene,
+                &mut pieces.comp,
+                again,
+                (limit, params.refine_steep_cos),
+                params.refine_passes,
+                rbufs,
+            );
             // The crease step takes these planes, refitted before this round as step 5's are before its second
             // round (a refit after the round gave the same counts and cost 0.7 ms per ABW frame).
         } else if band_moved {

@@ -76,6 +76,11 @@ pub struct Params {
     /// neighbour; within the fill limit). A border moves at most one pixel per pass; 0 = off
     /// (borders stay where growth and edges put them, the specification taken literally).
     pub refine_passes: u32,
+    /// `refine_passes` > 0: a plane whose normal makes a cosine under this with a border pixel's line of sight has
+    /// the pixel's distance to it and its RMS scaled up by `refine_steep_cos / cosine` (at most 5 times) in the
+    /// refinement's energy, toward their length along the line of sight, where range noise lies; otherwise the
+    /// pixels beside a face seen almost edge-on fit its plane within the noise whatever their depth (0 = off).
+    pub refine_steep_cos: f64,
     /// `regions` mode: two adjacent regions whose planes meet along their border (a bend of one
     /// surface, not a step: the mean distance of the border pixels to the other region's plane is
     /// below `bend_max_gap` times the regions' scatter) merge, whatever the edges, if their normals differ by at most this
@@ -140,6 +145,7 @@ impl Default for Params {
             fill_max_residual: 2.0,
             fill_rms_ratio: 2.0,
             refine_passes: 10,
+            refine_steep_cos: 0.3,
             bend_max_angle_deg: 30.0,
             bend_max_gap: 1.5,
             bend_fit_ratio: 2.0,
@@ -174,6 +180,7 @@ impl Params {
         ParamError::at_least("segment.bend_max_gap", self.bend_max_gap, 0.0)?;
         ParamError::at_least("segment.bend_fit_ratio", self.bend_fit_ratio, 0.0)?;
         ParamError::at_least("segment.terrace_gap_steps", self.terrace_gap_steps, 0.0)?;
+        ParamError::in_range("segment.refine_steep_cos", self.refine_steep_cos, 0.0, 1.0)?;
         ParamError::in_range("segment.crease_min_angle_deg", self.crease_min_angle_deg, 0.0, 90.0)?;
         ParamError::in_range("segment.band_max_angle_deg", self.band_max_angle_deg, 0.0, 90.0)?;
         ParamError::at_least("segment.outlier_scales", self.outlier_scales, 0.0)?;

@@ -25,7 +25,24 @@ impl Plane {
     pub(crate) fn residual(&self, p: [f64; 3]) -> f64 {
         self.signed(p).abs()
     }
+
+    /// How far a residual to this plane understates its misfit for a pixel whose line of sight is `ray` (a unit
+    /// vector), as a divisor in `[1 / STEEP_MAX_GAIN, 1]`: 1 while `|normal · ray|` is at least `steep_cos`, then
+    /// `|normal · ray| / steep_cos`. Range noise lies along the line of sight, and a point at distance `r` from a
+    /// plane seen at an angle whose cosine is `c` lies `r / c` from it along that line: on a plane seen almost
+    /// edge-on, the pixels beside it fit within the noise whatever their depth. 1 when `steep_cos` is 0 (off).
+    pub(crate) fn view_factor(&self, ray: [f64; 3], steep_cos: f64) -> f64 {
+        if steep_cos > 0.0 {
+            (dot(self.normal, ray).abs() / steep_cos).clamp(1.0 / STEEP_MAX_GAIN, 1.0)
+        } else {
+            1.0
+        }
+    }
 }
+
+/// The most [`Plane::view_factor`] multiplies a residual by (a plane seen within about 3.4° of edge-on at
+/// `steep_cos` 0.3).
+pub(crate) const STEEP_MAX_GAIN: f64 = 5.0;
 
 /// Mean squared distance of the points summarised by `m` to `plane` (`nᵀ·Σ·n` plus the centroid's
 /// squared distance).

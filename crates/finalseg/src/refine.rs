@@ -59,12 +59,13 @@ pub(crate) enum Start {
 /// label `l`) to the 8-adjacent region that fits them better (see `better_label`). At most
 /// `passes` passes: each is decided from the labels of the previous one only (ties keep the pixel
 /// where it is, then go to the smaller label), so the order of pixels does not matter; a border
-/// moves at most one pixel per pass. Returns the number of moves.
+/// moves at most one pixel per pass; `steep_cos` is the refinement's view limit (`Params::refine_steep_cos`). Returns
+/// the number of moves.
 pub(crate) fn refine(
     scene: &Scene<'_>,
     groups: &mut [u32],
     (planes, start): (&[Plane], Start),
-    limit: Limit,
+    (limit, steep_cos): (Limit, f64),
     passes: u32,
     bufs: &mut Buffers,
 ) -> u32 {
@@ -88,10 +89,9 @@ pub(crate) fn refine(
     let mut total = 0u32;
     for _ in 0..passes {
         moves.clear();
-        moves.extend(
-            cand.iter()
-                .filter_map(|&i| better_label(scene, groups, planes, i as usize, limit).map(|l| (i, l))),
-        );
+        moves.extend(cand.iter().filter_map(|&i| {
+            better_label(scene, groups, planes, i as usize, (limit, steep_cos)).map(|l| (i, l))
+        }));
         if moves.is_empty() {
             break;
         }
@@ -318,8 +318,16 @@ pub(crate) fn refit(
 /// The label pixel `i` should move to, if an 8-adjacent region fits it better than its own (and
 /// within `limit`). "Fits" is a Potts energy: the squared distance to the region's plane in units
 /// of the noise (the largest RMS of the candidate planes, at least `SIGMA_FLOOR`), plus `BETA` per
-/// 8-neighbour of another label, so that noise near a shallow crease does not fray the border.
-fn better_label(scene: &Scene<'_>, groups: &[u32], planes: &[Plane], i: usize, limit: Limit) -> Option<u32> {
+/// 8-neighbour of another label, so that noise near a shallow crease does not fray the border. With `steep_cos` > 0,
+/// the distances to and RMS of a plane that the pixel's line of sight meets at a cosine under `steep_cos` are divided
+/// by [`Plane::view_factor`].
+fn better_label(
+    scene: &Scene<'_>,
+    groups: &[u32],
+    planes: &[Plane],
+    i: usize,
+    (limit, steep_cos): (Limit, f64),
+) -> Option<u32> {
     let (w, h) = (scene.w, scene.h);
     let own = groups[i];
     let p = scene.point(i % w, i / w)?;
@@ -343,13 +351,18 @@ fn better_label(scene: &Scene<'_>, groups: &[u32], planes: &[Plane], i: usize, l
     if n == 1 {
         return None;
     }
-    let sigma = labs[..n].iter().map(|e| plane_of(e.0).rms).fold(SIGMA_FLOOR, f64::max);
+    // Residuals and RMS of planes seen steeply from this pixel, scaled up toward their length along the line of
+    // sight (`Plane::view_factor`; all 1 when `steep_cos` is 0).
+    let ray = if steep_cos > 0.0 { scene.camera.toward_sensor(p) } else { [0.0; 3] };
+    let factor = |l: u32| plane_of(l).view_factor(ray, steep_cos);
+    let residual = |l: u32| plane_of(l).residual(p) / factor(l);
+    let sigma = labs[..n].iter().map(|e| plane_of(e.0).rms / factor(e.0)).fold(SIGMA_FLOOR, f64::max);
     // A pixel its own plane explains within the noise stays.
-    if plane_of(own).residual(p) <= OUTLIER * sigma {
+    if residual(own) <= OUTLIER * sigma {
         return None;
     }
     let energy = |(l, k): (u32, u32)| {
-        let r = plane_of(l).residual(p) / sigma;
+        let r = residual(l) / sigma;
         r * r + BETA * f64::from(8 - k)
     };
     let mut best = (energy(labs[0]), own);
@@ -378,6 +391,33 @@ pub(crate) const SIGMA_FLOOR: f64 = 0.25;
 mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
+
+    /// A pixel of a plane facing the sensor beside a face seen almost edge-on (grid camera, the face's normal at a
+    /// cosine of 0.0995 with the line of sight), one unit off its own plane and ten units in front of the face's
+    /// plane along its line of sight: only one unit from the face's plane in 3D. With most of its neighbours on the
+    /// face, it joins the face when distances are taken as they are, and stays with `steep_cos` 0.3.
+    #[test]
+    fn a_face_seen_edge_on_does_not_take_the_pixels_beside_it() {
+        let camera = rangeimage::Camera::Grid;
+        let range = [100.0, 0.0, 0.0, 100.0, 101.0, 0.0, 100.0, 0.0, 0.0];
+        let scene = Scene { range: &range, w: 3, h: 3, camera: &camera };
+        // Label 1 on the left column and the centre, label 2 (the face) on the other five pixels.
+        let groups = [1, 2, 2, 1, 1, 2, 1, 2, 2];
+        let k = 101f64.sqrt();
+        let planes = [
+            Plane { normal: [0.0, 0.0, -1.0], offset: 100.0, rms: 0.5 },
+            Plane { normal: [10.0 / k, 0.0, -1.0 / k], offset: 101.0 / k, rms: 0.1 },
+        ];
+        assert!((planes[1].residual([1.0, 1.0, 101.0]) - 10.0 / k).abs() < 1e-12);
+        let limit = Limit { max_residual: 2.0, rms_ratio: 2.0 };
+        assert_eq!(better_label(&scene, &groups, &planes, 4, (limit, 0.0)), Some(2));
+        assert_eq!(better_label(&scene, &groups, &planes, 4, (limit, 0.3)), None);
+        // Facing the sensor more than the view limit, a plane's distances are taken as they are.
+        assert_eq!(planes[0].view_factor([0.0, 0.0, -1.0], 0.3), 1.0);
+        assert!((planes[1].view_factor([0.0, 0.0, -1.0], 0.3) - 1.0 / k / 0.3).abs() < 1e-12);
+        assert_eq!(planes[1].view_factor([0.0, 0.0, -1.0], 0.01), 1.0);
+        assert_eq!(planes[1].view_factor([0.0, 1.0, 0.0], 0.3), 0.2, "at most 5 times");
+    }
 
     /// The border list updated around random moves is the list a scan of the moved labels finds.
     #[test]
