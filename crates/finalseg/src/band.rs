@@ -232,7 +232,8 @@ mod tests {
             })
             .collect();
         let camera = Camera::Grid;
-        let scene = Scene { range: &range, w, h, camera: &camera };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
         let mut groups: Vec<u32> = (0..w * h).map(|i| if i % w < first { 1 } else { 2 }).collect();
         let mut moments = [Moments::default(); 2];
         for (i, &l) in groups.iter().enumerate() {
@@ -297,7 +298,8 @@ mod tests {
                     if rng.random_bool(0.03) { f32::NAN } else { v }
                 })
                 .collect();
-            let scene = Scene { range: &range, w, h, camera: &camera };
+            let mut points = Vec::new();
+            let scene = Scene::new(&range, (w, h), &camera, &mut points);
             let groups: Vec<u32> = (0..w * h)
                 .map(|i| {
                     if rng.random_bool(0.1) {

@@ -194,7 +194,8 @@ mod tests {
         let (w, h) = (60usize, 10usize);
         let range: Vec<f32> = (0..w * h).map(|i| 100.0 + sign * ((i % w) as f32 - 30.5).abs()).collect();
         let camera = Camera::Grid;
-        let scene = Scene { range: &range, w, h, camera: &camera };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
         let mut groups: Vec<u32> = (0..w * h).map(|i| if i % w <= 27 { 1 } else { 2 }).collect();
         let mut moments = [Moments::default(); 2];
         for i in 0..w * h {

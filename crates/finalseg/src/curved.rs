@@ -301,7 +301,8 @@ mod tests {
             .collect();
         let labels: Vec<u32> = (0..w * h).map(|i| if i % w < 30 { 1 } else { 2 }).collect();
         let camera = Camera::Grid;
-        let scene = Scene { range: &range, w, h, camera: &camera };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
         let mut moments = vec![Moments::default(); 2];
         for (i, &l) in labels.iter().enumerate() {
             moments[l as usize - 1].add(scene.point(i % w, i / w).expect("finite"));

@@ -138,8 +138,8 @@ pub struct Scratch {
     band: band::Buffers,
     /// Step 8: the curved merge's buffers.
     curved: curved::Buffers,
-    /// Steps 2 and 5–8: the 3D points of one row.
-    row: Vec<[f64; 3]>,
+    /// Every pixel's 3D point, computed once a frame for steps 2–8.
+    points: Vec<[f64; 3]>,
     /// Steps 4–9: the merge forest, the root of each label, the final label of each root and the roots in
     /// order of first pixel.
     parent: Vec<u32>,
@@ -172,7 +172,6 @@ pub fn segment_into(
         Mode::Components => None,
     };
     let (w, h) = (range.width() as usize, range.height() as usize);
-    let scene = Scene { range: range.as_slice(), w, h, camera };
     let Scratch {
         core,
         row_dist,
@@ -190,12 +189,13 @@ pub fn segment_into(
         outliers: obufs,
         band: bbufs,
         curved: cvbufs,
-        row,
+        points,
         parent,
         root,
         map,
         order,
     } = scratch;
+    let scene = Scene::new(range.as_slice(), (w, h), camera, points);
 
     // 1. 4-connected components of core pixels (two neighbours connect only if their guide
     //    labels agree), numbered in raster order of their first pixel, into the memory of the output labels.
@@ -211,7 +211,7 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, (sizes, &mut cbufs.id), (kept, row), guide, params.min_region_px);
+    pieces.fit(&scene, (sizes, &mut cbufs.id), kept, guide, params.min_region_px);
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -231,21 +231,14 @@ pub fn segment_into(
 
     // 5–6. Border pixels to the adjacent plane that fits them best, bands of a neighbour's plane given back whole;
     //      crease pixels to the face their line of sight sees.
-    place_borders(
-        &scene,
-        &mut pieces,
-        parent,
-        (params, limit),
-        (root, refitted, row),
-        (rbufs, crbufs, bbufs),
-    );
+    place_borders(&scene, &mut pieces, parent, (params, limit), (root, refitted), (rbufs, crbufs, bbufs));
 
     // 7. Pixels their region's plane does not explain, in groups, left unlabelled (by the planes refitted on the
     //    regions as they now are).
     if params.outlier_scales > 0.0 {
-        refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+        refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
         let limits = (params.outlier_scales, params.outlier_min_px as usize);
-        let n = outliers::release(&scene, &mut pieces.comp, refitted, limits, (obufs, row));
+        let n = outliers::release(&scene, &mut pieces.comp, refitted, limits, obufs);
         tracing::debug!(released = n, "outliers");
     }
 
@@ -257,7 +250,7 @@ pub fn segment_into(
         let released: &[(u32, u32)] = if params.outlier_scales > 0.0 {
             obufs.released()
         } else {
-            refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            refine::refit_from(&scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
             &[]
         };
         let fits = (&mut pieces.moments[..], &mut pieces.planes[..]);
@@ -286,13 +279,13 @@ fn carry_roots(parent: &mut [u32], root: &mut Vec<u32>, comp: &mut [u32]) {
 
 /// Steps 5, 5b and 6 of [`segment_into`] on the merged groups of `parent`: border refinement, bands and crease
 /// pixels, each when it is on (the pixels carry their groups' roots afterwards whenever step 5, 5b, 6 or 7 is on);
-/// `root`, `refitted` and `row` are working memory, `rbufs`, `crbufs` and `bbufs` the steps' buffers.
+/// `root` and `refitted` are working memory, `rbufs`, `crbufs` and `bbufs` the steps' buffers.
 fn place_borders(
     scene: &Scene<'_>,
     pieces: &mut Pieces,
     parent: &mut [u32],
     (params, limit): (&Params, fill::Limit),
-    (root, refitted, row): (&mut Vec<u32>, &mut Vec<Plane>, &mut Vec<[f64; 3]>),
+    (root, refitted): (&mut Vec<u32>, &mut Vec<Plane>),
     (rbufs, crbufs, bbufs): (&mut refine::Buffers, &mut crease::Buffers, &mut band::Buffers),
 ) {
     let (w, h) = (scene.w, scene.h);
@@ -311,7 +304,7 @@ fn place_borders(
         let (passes, first) = (params.refine_passes, (&pieces.planes[..], refine::Start::Scan));
         if refine::refine(scene, &mut pieces.comp, first, (limit, params.refine_steep_cos), passes, rbufs) > 0
         {
-            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
             refit_done = true;
             let second = (&refitted[..], refine::Start::Update);
             refine::refine(scene, &mut pieces.comp, second, (limit, params.refine_steep_cos), passes, rbufs);
@@ -321,7 +314,7 @@ fn place_borders(
     // 5b. Bands of a neighbour's plane that a region holds, given back whole.
     if params.band_max_angle_deg > 0.0 {
         if !refit_done {
-            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
             refit_done = true;
         }
         // The refinement's border list is that of the current labels, once updated around its last moves.
@@ -335,7 +328,7 @@ fn place_borders(
         if band_moved && params.refine_passes > 0 {
             // A refinement round against the planes refitted on the moved bands: the pixels of a band where the
             // leaking region's tilted plane crossed it are outliers of that region's plane now.
-            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
             let again = (&refitted[..], refine::Start::Scan);
             refine::refine(
                 scene,
@@ -356,7 +349,7 @@ fn place_borders(
     // 6. Crease pixels to the face their line of sight sees, by the planes of the refined regions.
     if params.crease_passes > 0 {
         if !refit_done {
-            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, (&mut *rbufs, &mut *row));
+            refine::refit_from(scene, &pieces.comp, &pieces.planes, refitted, &mut *rbufs);
         }
         // The refinement's border list is that of the current labels, once updated around its last moves (a band
         // that moved was followed by a refinement round, which scanned the labels again).
@@ -377,23 +370,48 @@ struct Scene<'a> {
     w: usize,
     h: usize,
     camera: &'a Camera,
+    /// Every pixel's 3D point ([`Camera::point`]'s bits where the value is finite, meaningless elsewhere).
+    points: &'a [[f64; 3]],
 }
 
-impl Scene<'_> {
+impl<'a> Scene<'a> {
+    /// The scene of `range` (`w` × `h`) seen by `camera`, with every pixel's 3D point computed once into `points`.
+    fn new(
+        range: &'a [f32],
+        (w, h): (usize, usize),
+        camera: &'a Camera,
+        points: &'a mut Vec<[f64; 3]>,
+    ) -> Self {
+        points.clear();
+        points.resize(w * h, [0.0; 3]);
+        // Compiled for the best instruction set of this CPU, so the points are computed several at a time (the same
+        // bits on every one).
+        isa::dispatch(
+            #[inline(always)]
+            || {
+                for (y, (vals, out)) in
+                    range.chunks_exact(w.max(1)).zip(points.chunks_exact_mut(w.max(1))).enumerate()
+                {
+                    camera.row_points(y as u32, vals, out);
+                }
+            },
+        );
+        Scene { range, w, h, camera, points }
+    }
+
     /// The 3D point of pixel (x, y); `None` where the range value is not valid.
     #[inline]
     fn point(&self, x: usize, y: usize) -> Option<[f64; 3]> {
-        self.camera.point(x as f64, y as f64, f64::from(self.range[y * self.w + x]))
+        let i = y * self.w + x;
+        self.range[i].is_finite().then(|| self.points[i])
     }
 
-    /// The range values of row `y` and, into `out` (resized to the width), their 3D points: [`Scene::point`]'s
-    /// bits where the value is finite, meaningless elsewhere. Inlined, for callers in `isa::dispatch`.
+    /// The range values of row `y` and their 3D points: [`Scene::point`]'s bits where the value is finite,
+    /// meaningless elsewhere.
     #[inline(always)]
-    fn row_points(&self, y: usize, out: &mut Vec<[f64; 3]>) -> &[f32] {
-        let vals = &self.range[y * self.w..(y + 1) * self.w];
-        out.resize(self.w, [0.0; 3]);
-        self.camera.row_points(y as u32, vals, out);
-        vals
+    fn row(&self, y: usize) -> (&[f32], &[[f64; 3]]) {
+        let r = y * self.w..(y + 1) * self.w;
+        (&self.range[r.clone()], &self.points[r])
     }
 }
 
@@ -442,7 +460,7 @@ impl Pieces {
         &mut self,
         scene: &Scene<'_>,
         (sizes, ids): (&[u32], &mut [u32]),
-        (kept, row): (&mut Vec<u32>, &mut Vec<[f64; 3]>),
+        kept: &mut Vec<u32>,
         guide: Option<&[u32]>,
         min_region_px: u32,
     ) {
@@ -473,8 +491,7 @@ impl Pieces {
         self.moments.reserve(room);
         self.moments.resize(n, Moments::default());
         let (comp, guides, moments, ids) = (&mut self.comp, &mut self.guide, &mut self.moments, &*ids);
-        // Compiled for the best instruction set of this CPU, so each row's points are computed several at a
-        // time (the same bits on every one).
+        // Compiled for the best instruction set of this CPU (the same bits on every one).
         isa::dispatch(
             #[inline(always)]
             || {
@@ -488,7 +505,7 @@ impl Pieces {
                     if labels.iter().all(|&c| c == 0) {
                         continue;
                     }
-                    let vals = scene.row_points(y, row);
+                    let (vals, row) = scene.row(y);
                     for (x, c) in labels.iter_mut().enumerate() {
                         if *c == 0 {
                             continue;

@@ -683,7 +683,8 @@ mod tests {
                     rms: 0.5,
                 })
                 .collect();
-            let scene = Scene { range: &range, w, h, camera: &rangeimage::Camera::Grid };
+            let mut points = Vec::new();
+            let scene = Scene::new(&range, (w, h), &rangeimage::Camera::Grid, &mut points);
             for gaps in [false, true] {
                 table.reset(n as usize, 4);
                 borders_into(&scene, &comp, &near, (&planes, gaps), None, &mut table);
@@ -711,7 +712,8 @@ mod tests {
         ];
         let guide = [9, 9, 8, 9];
         let range = vec![100.0f32; w * h];
-        let scene = Scene { range: &range, w, h, camera: &rangeimage::Camera::Grid };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &rangeimage::Camera::Grid, &mut points);
         let planes = vec![Plane { normal: [0.0, 0.0, 1.0], offset: -100.0, rms: 0.1 }; 4];
         let near = vec![false; w * h];
         let mut table = Borders::default();
@@ -735,7 +737,8 @@ mod tests {
     #[test]
     fn joint_plane_test_merges_coplanar_pieces_but_not_a_step() {
         let range = vec![0.0f32; 1];
-        let scene = Scene { range: &range, w: 1, h: 1, camera: &rangeimage::Camera::Grid };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (1, 1), &rangeimage::Camera::Grid, &mut points);
         // Two thin strips (3 px wide, 30 long) of z = 0.5 x + noise, the second 30 px farther along.
         let strip = |x0: f64, dz: f64| {
             let mut m = Moments::default();

@@ -40,7 +40,7 @@ pub(crate) fn release(
     groups: &mut [u32],
     planes: &[Plane],
     (scales, min_px): (f64, usize),
-    (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
+    bufs: &mut Buffers,
 ) -> usize {
     let (w, h) = (scene.w, scene.h);
     let Buffers { state, outliers, stack, group, released: freed } = bufs;
@@ -53,8 +53,7 @@ pub(crate) fn release(
     }
     freed.clear();
     freed.reserve(w * h);
-    // Compiled for the best instruction set of this CPU, so each row's points are computed several at a time (the
-    // same bits on every one).
+    // Compiled for the best instruction set of this CPU (the same bits on every one).
     isa::dispatch(
         #[inline(always)]
         || {
@@ -62,7 +61,7 @@ pub(crate) fn release(
                 if labels.iter().all(|&l| l == 0) {
                     continue;
                 }
-                let vals = scene.row_points(y, row);
+                let (vals, row) = scene.row(y);
                 for (x, &l) in labels.iter().enumerate() {
                     if l == 0 || !vals[x].is_finite() {
                         continue;
@@ -143,7 +142,8 @@ mod tests {
             })
             .collect();
         let camera = Camera::Grid;
-        let scene = Scene { range: &range, w, h, camera: &camera };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
         let mut groups: Vec<u32> = (0..w * h).map(|i| label(i % w, i / w)).collect();
         let mut moments = [Moments::default(); 2];
         for (i, &l) in groups.iter().enumerate() {
@@ -152,7 +152,7 @@ mod tests {
         let planes = moments.map(|m| fit_plane(&m, &camera));
         let before = groups.clone();
         let mut bufs = Buffers::default();
-        let n = release(&scene, &mut groups, &planes, (2.5, 10), (&mut bufs, &mut Vec::new()));
+        let n = release(&scene, &mut groups, &planes, (2.5, 10), &mut bufs);
         // The released list names exactly the pixels left unlabelled, each with the label it had.
         let mut freed: Vec<(u32, u32)> =
             (0..w * h).filter(|&i| groups[i] == 0 && before[i] != 0).map(|i| (i as u32, before[i])).collect();

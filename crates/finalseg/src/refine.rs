@@ -257,27 +257,21 @@ pub(crate) fn refit_from(
     groups: &[u32],
     base: &[Plane],
     planes: &mut Vec<Plane>,
-    (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
+    bufs: &mut Buffers,
 ) {
     planes.clear();
     planes.extend_from_slice(base);
-    refit(scene, groups, planes, (bufs, row));
+    refit(scene, groups, planes, bufs);
 }
 
 /// Refits `planes` (`planes[l − 1]` for label `l`) to every valid pixel of each label of `groups`,
-/// moments summed in raster order; a label without pixels keeps its plane. `row` holds one row of 3D points.
-pub(crate) fn refit(
-    scene: &Scene<'_>,
-    groups: &[u32],
-    planes: &mut [Plane],
-    (bufs, row): (&mut Buffers, &mut Vec<[f64; 3]>),
-) {
+/// moments summed in raster order; a label without pixels keeps its plane.
+pub(crate) fn refit(scene: &Scene<'_>, groups: &[u32], planes: &mut [Plane], bufs: &mut Buffers) {
     let moments = &mut bufs.moments;
     moments.clear();
     moments.resize(planes.len(), Moments::default());
     let w = scene.w;
-    // Compiled for the best instruction set of this CPU, so each row's points are computed several at a time
-    // (the same bits on every one).
+    // Compiled for the best instruction set of this CPU (the same bits on every one).
     isa::dispatch(
         #[inline(always)]
         || {
@@ -289,7 +283,7 @@ pub(crate) fn refit(
                 if labels.iter().all(|&l| l == 0) {
                     continue;
                 }
-                let vals = scene.row_points(y, row);
+                let (vals, row) = scene.row(y);
                 for (x, &l) in labels.iter().enumerate() {
                     if l != 0 && vals[x].is_finite() {
                         if l != cur {
@@ -400,7 +394,8 @@ mod tests {
     fn a_face_seen_edge_on_does_not_take_the_pixels_beside_it() {
         let camera = rangeimage::Camera::Grid;
         let range = [100.0, 0.0, 0.0, 100.0, 101.0, 0.0, 100.0, 0.0, 0.0];
-        let scene = Scene { range: &range, w: 3, h: 3, camera: &camera };
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (3, 3), &camera, &mut points);
         // Label 1 on the left column and the centre, label 2 (the face) on the other five pixels.
         let groups = [1, 2, 2, 1, 1, 2, 1, 2, 2];
         let k = 101f64.sqrt();
