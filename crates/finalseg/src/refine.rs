@@ -346,24 +346,28 @@ fn better_label(
         return None;
     }
     // Residuals and RMS of planes seen steeply from this pixel, scaled up toward their length along the line of
-    // sight (`Plane::view_factor`; all 1 when `steep_cos` is 0).
+    // sight (`Plane::view_factor`; all 1 when `steep_cos` is 0), once per label.
     let ray = if steep_cos > 0.0 { scene.camera.toward_sensor(p) } else { [0.0; 3] };
-    let factor = |l: u32| plane_of(l).view_factor(ray, steep_cos);
-    let residual = |l: u32| plane_of(l).residual(p) / factor(l);
-    let sigma = labs[..n].iter().map(|e| plane_of(e.0).rms / factor(e.0)).fold(SIGMA_FLOOR, f64::max);
+    let (mut res, mut sigma) = ([0.0f64; 9], SIGMA_FLOOR);
+    for (r, &(l, _)) in res.iter_mut().zip(&labs[..n]) {
+        let plane = plane_of(l);
+        let factor = plane.view_factor(ray, steep_cos);
+        *r = plane.residual(p) / factor;
+        sigma = sigma.max(plane.rms / factor);
+    }
     // A pixel its own plane explains within the noise stays.
-    if residual(own) <= OUTLIER * sigma {
+    if res[0] <= OUTLIER * sigma {
         return None;
     }
-    let energy = |(l, k): (u32, u32)| {
-        let r = residual(l) / sigma;
-        r * r + BETA * f64::from(8 - k)
+    let energy = |k: usize| {
+        let r = res[k] / sigma;
+        r * r + BETA * f64::from(8 - labs[k].1)
     };
-    let mut best = (energy(labs[0]), own);
-    for &e in &labs[1..n] {
-        let en = energy(e);
-        if en < best.0 || (en == best.0 && best.1 != own && e.0 < best.1) {
-            best = (en, e.0);
+    let mut best = (energy(0), own);
+    for k in 1..n {
+        let en = energy(k);
+        if en < best.0 || (en == best.0 && best.1 != own && labs[k].0 < best.1) {
+            best = (en, labs[k].0);
         }
     }
     let l = best.1;
