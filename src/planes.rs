@@ -58,10 +58,11 @@ pub fn planes(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<P
 /// [`planes`] once the sizes are checked.
 #[inline(always)] // into `isa::dispatch` in `planes`: compiled for each instruction set
 fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<Plane> {
-    // Sums indexed by the label itself when the labels are at most as many as the pixels (a segmentation's 1..n:
-    // no table of the labels present is built), else by the label's rank among the sorted distinct labels.
+    // Sums indexed by the label itself when the largest label is small against the pixel count (a segmentation's
+    // 1..n; the sums then take at most about 4 bytes a pixel, and no table of the labels present is built), else by
+    // the label's rank among the sorted distinct labels.
     let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
-    let dense = max <= labels.len();
+    let dense = max <= labels.len() / 32;
     let sparse: Vec<u32> = if dense {
         Vec::new()
     } else {
@@ -118,9 +119,9 @@ fn fit_regions(range: &RangeImage, labels: &LabelImage, camera: &Camera) -> Vec<
         },
     );
 
-    let ids: Vec<u32> = if dense { (0..=max as u32).collect() } else { sparse };
-    ids.into_iter()
-        .zip(acc)
+    acc.into_iter()
+        .enumerate()
+        .map(|(j, a)| (if dense { j as u32 } else { sparse[j] }, a))
         .filter(|(label, a)| *label != 0 && a.pixels > 0)
         .map(|(label, a)| {
             let n = a.points as f64;
