@@ -305,6 +305,16 @@ const LANES: usize = 4;
 /// order, so the same bits: [`window_rms_one_by_one`] in the tests), so their dependency chains (the
 /// sequential sums) overlap.
 fn window_rms(range: &rangeimage::RangeImage, stride: usize, out: &mut Vec<f64>) {
+    // Compiled for the best instruction set of this CPU (the same operations in the same order: the same bits).
+    isa::dispatch(
+        #[inline(always)]
+        || window_rms_kernel(range, stride, out),
+    );
+}
+
+/// [`window_rms`]'s loops.
+#[inline(always)] // into `isa::dispatch` in `window_rms`: compiled for each instruction set
+fn window_rms_kernel(range: &rangeimage::RangeImage, stride: usize, out: &mut Vec<f64>) {
     let (w, h) = (range.width() as usize, range.height() as usize);
     out.clear();
     if w < WINDOW || h < WINDOW {
@@ -655,7 +665,7 @@ mod tests {
     }
 
     /// The windows side by side give the RMS of the windows one by one, bit for bit, on random images with
-    /// missing data, every stride up to 5 and widths that leave partial groups.
+    /// missing data, every stride up to 5 and widths that leave partial groups, on every instruction-set path.
     #[test]
     fn windows_side_by_side_match_one_by_one() {
         use rand::{RngExt, SeedableRng};
@@ -671,11 +681,18 @@ mod tests {
                     };
                 }
                 for stride in 1..=5 {
-                    let (mut a, mut b) = (Vec::new(), Vec::new());
-                    window_rms(&img, stride, &mut a);
+                    let mut b = Vec::new();
                     window_rms_one_by_one(&img, stride, &mut b);
                     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&a), bits(&b), "{w}x{h}, missing {missing}, stride {stride}");
+                    for path in isa::Isa::available() {
+                        let mut a = Vec::new();
+                        isa::with_isa(path, || window_rms(&img, stride, &mut a)).expect("available");
+                        assert_eq!(
+                            bits(&a),
+                            bits(&b),
+                            "{w}x{h}, missing {missing}, stride {stride}, {path:?}"
+                        );
+                    }
                 }
             }
         }
