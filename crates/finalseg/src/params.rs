@@ -142,7 +142,7 @@ impl Default for Params {
             within_close_px: 8,
             merge_max_angle_deg: 10.0,
             merge_max_residual: 3.0,
-            fill_max_residual: 2.0,
+            fill_max_residual: 3.0,
             fill_rms_ratio: 2.0,
             refine_passes: 10,
             refine_steep_cos: 0.3,
