@@ -646,6 +646,32 @@ mod tests {
         }
     }
 
+    /// The default fill limit (4 units) with the default outlier step (2.25 noise scales, groups of 10 px): single
+    /// glitch pixels 3.5 units off a flat plane, edge pixels all of them, are filled and stay in its region; a 4×4
+    /// patch 3.5 units off is filled too but released again as a group. With the limit of 3 the glitches stay 0.
+    #[test]
+    fn default_fill_keeps_glitches_and_the_outlier_step_releases_groups() {
+        let glitch = |x: u32, y: u32| [(12, 10), (25, 7), (31, 22), (18, 24)].contains(&(x, y));
+        let patch = |x: u32, y: u32| (5..9).contains(&x) && (15..19).contains(&y);
+        let range = Grid::from_fn(40, 30, |x, y| if glitch(x, y) || patch(x, y) { 103.5 } else { 100.0 });
+        let edges = Grid::from_fn(40, 30, |x, y| glitch(x, y) || patch(x, y));
+        let defaults = Params { gap_close_px: 0.0, ..Params::default() };
+        assert_eq!(
+            (defaults.fill_max_residual, defaults.outlier_scales, defaults.outlier_min_px),
+            (4.0, 2.25, 10)
+        );
+        for (limit, want_glitch) in [(4.0, 1u32), (3.0, 0)] {
+            let p = Params { fill_max_residual: limit, ..defaults.clone() };
+            let (labels, regions) = segment(&range, &Camera::Grid, &edges, None, &p);
+            assert_eq!(regions.len(), 1, "limit {limit}");
+            for (x, y) in [(12, 10), (25, 7), (31, 22), (18, 24)] {
+                assert_eq!(labels[(x, y)], want_glitch, "glitch ({x}, {y}), limit {limit}");
+            }
+            assert_eq!(labels[(6, 16)], 0, "patch, limit {limit}");
+            assert_eq!(labels[(20, 15)], 1, "plane, limit {limit}");
+        }
+    }
+
     /// `fill_rms_ratio`: a rough plane (a ±2-unit checker ripple, RMS 2) keeps a pixel 4 units off it that the
     /// absolute limit of 3 alone would leave unlabelled; a pixel 20 units off stays 0 either way.
     #[test]
