@@ -651,7 +651,8 @@ mod tests {
     /// patch 3.5 units off is filled too but released again as a group. With the limit of 3 the glitches stay 0.
     #[test]
     fn default_fill_keeps_glitches_and_the_outlier_step_releases_groups() {
-        let glitch = |x: u32, y: u32| [(12, 10), (25, 7), (31, 22), (18, 24)].contains(&(x, y));
+        let glitches = [(12u32, 10u32), (25, 7), (31, 22), (18, 24)];
+        let glitch = |x: u32, y: u32| glitches.contains(&(x, y));
         let patch = |x: u32, y: u32| (5..9).contains(&x) && (15..19).contains(&y);
         let range = Grid::from_fn(40, 30, |x, y| if glitch(x, y) || patch(x, y) { 103.5 } else { 100.0 });
         let edges = Grid::from_fn(40, 30, |x, y| glitch(x, y) || patch(x, y));
@@ -664,7 +665,7 @@ mod tests {
             let p = Params { fill_max_residual: limit, ..defaults.clone() };
             let (labels, regions) = segment(&range, &Camera::Grid, &edges, None, &p);
             assert_eq!(regions.len(), 1, "limit {limit}");
-            for (x, y) in [(12, 10), (25, 7), (31, 22), (18, 24)] {
+            for (x, y) in glitches {
                 assert_eq!(labels[(x, y)], want_glitch, "glitch ({x}, {y}), limit {limit}");
             }
             assert_eq!(labels[(6, 16)], 0, "patch, limit {limit}");
