@@ -40,6 +40,8 @@ pub struct PipelineParams {
     pub final_edges: FinalEdges,
     /// Run pinhole images (and grid images of unusual noise) in working units of a fixed noise level ([`crate::units`]).
     pub normalize_units: bool,
+    /// Dequantise depth rounded to steps coarser than its noise before the stages run ([`crate::dequantise`]).
+    pub dequantise: bool,
 }
 
 impl Default for PipelineParams {
@@ -49,6 +51,7 @@ impl Default for PipelineParams {
             relax: true,
             final_edges: FinalEdges::default(),
             normalize_units: true,
+            dequantise: true,
         }
     }
 }
@@ -120,6 +123,7 @@ impl Config {
         c.vcanny.thresholds.high = 64.0;
         c.pipeline.c1_strength = C1Strength::AbsK;
         c.pipeline.final_edges = FinalEdges::Relaxed;
+        c.pipeline.dequantise = false;
         c.relax.support_px = 0.0;
         c.regiongrow = regiongrow::Params::paper();
         c.segment.mode = finalseg::Mode::Components;
@@ -288,6 +292,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "pipeline.normalize_units",
         "Scale pinhole depth to a noise σ of 0.25 (and grid depth outside σ 0.25–1) so distances mean the same in any unit.",
+    ),
+    (
+        "pipeline.dequantise",
+        "Dequantise depth rounded to steps above its noise (a staircase on every slope) before the stages run.",
     ),
     ("features", "Local planes, derivatives and curvatures (window sides in pixels, odd)."),
     ("features.window_px", "Window of the local plane fit (odd, ≥ 3)."),

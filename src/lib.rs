@@ -3,6 +3,7 @@
 //! The facade crate: it re-exports the pipeline stages and holds the configuration that ties them.
 
 pub mod config;
+pub mod dequantise;
 pub mod evaluate;
 pub mod output;
 pub mod pipeline;

@@ -100,6 +100,8 @@ pub struct Segmenter {
 struct Scratch {
     /// The frame in working units, when they are not its own.
     work: RangeImage,
+    /// The dequantisation's buffers (the frame dequantised when it is a staircase).
+    dequantise: crate::dequantise::Scratch,
     /// The noise estimate's window RMS values.
     noise: Vec<f64>,
     valid: Grid<bool>,
@@ -131,7 +133,26 @@ impl Segmenter {
         let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
         let Self { config, out, scratch } = self;
         let t = Instant::now();
-        let units = crate::units::for_config(range, camera, config, &mut scratch.noise);
+        // A staircase (depth rounded to steps above its noise) runs dequantised, in working units of its own;
+        // other images reuse the σ the test read.
+        let (dequantised, sigma) = if config.pipeline.dequantise {
+            scratch.dequantise.reserve(range.len());
+            // Room for the σ of every sampled window, whether or not this frame's test reads them all.
+            let stride = crate::units::SAMPLE_STRIDE;
+            let windows = (range.width() as usize / stride + 1) * (range.height() as usize / stride + 1);
+            scratch.noise.clear();
+            scratch.noise.reserve(windows);
+            let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
+            let stairs = crate::dequantise::staircase(range, &mut scratch.noise, screen);
+            match stairs.step {
+                Some(q) => (Some(crate::dequantise::dequantise(range, q, &mut scratch.dequantise)), None),
+                None => (None, stairs.sigma),
+            }
+        } else {
+            (None, None)
+        };
+        let range = dequantised.as_ref().unwrap_or(range);
+        let units = crate::units::for_config_given(range, camera, config, sigma, &mut scratch.noise);
         let mut work = std::mem::take(&mut scratch.work);
         let range = if units.is_identity() {
             range
@@ -174,6 +195,9 @@ impl Segmenter {
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
         out.units = Some(units);
         scratch.work = work;
+        if let Some(d) = dequantised {
+            scratch.dequantise.recycle(d);
+        }
         &self.out
     }
 

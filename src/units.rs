@@ -26,7 +26,7 @@ pub const PINHOLE_SIGMA: f64 = 0.25;
 /// Grid images whose σ lies within this range run in their own units; others are scaled to its nearest end.
 pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
 /// Stride of the 5 × 5 windows σ is read from (1/16 of them).
-const SAMPLE_STRIDE: usize = 4;
+pub(crate) const SAMPLE_STRIDE: usize = 4;
 
 /// How one image is run: its depth values times `factor`, seen through `camera`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,12 +69,24 @@ pub fn working_units(range: &RangeImage, camera: &Camera) -> WorkingUnits {
 
 /// [`working_units`] with the noise estimate's scratch memory in `scratch` (for a stream of frames).
 pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec<f64>) -> WorkingUnits {
+    working_units_given(range, camera, None, scratch)
+}
+
+/// [`working_units_with`], given `sigma`, the σ of `range` (`planefit::noise::sigma_sampled` at this module's
+/// stride, in the image's own units) if the caller read it already.
+pub fn working_units_given(
+    range: &RangeImage,
+    camera: &Camera,
+    sigma: Option<f64>,
+    scratch: &mut Vec<f64>,
+) -> WorkingUnits {
     let (depth_scale, (lo, hi)) = match *camera {
         Camera::Abw(_) => return WorkingUnits::identity(camera),
         Camera::Pinhole { depth_scale, .. } => (depth_scale, (PINHOLE_SIGMA, PINHOLE_SIGMA)),
         Camera::Grid => (1.0, GRID_SIGMA_BAND),
     };
-    let sigma = planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, scratch) * depth_scale;
+    let sigma = sigma.unwrap_or_else(|| planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, scratch))
+        * depth_scale;
     // Depth rounded to steps without noise reads σ ≈ 0 (most windows lie within one step; a float fit of a flat
     // window leaves ~1e-11): its rounding error is still that of its step, q / √12.
     // The step test runs only when it matters: σ below the rounding error of the smallest difference.
@@ -103,8 +115,19 @@ pub fn for_config(
     config: &crate::Config,
     scratch: &mut Vec<f64>,
 ) -> WorkingUnits {
+    for_config_given(range, camera, config, None, scratch)
+}
+
+/// [`for_config`], given the σ of `range` if the caller read it already (see [`working_units_given`]).
+pub fn for_config_given(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &crate::Config,
+    sigma: Option<f64>,
+    scratch: &mut Vec<f64>,
+) -> WorkingUnits {
     if config.pipeline.normalize_units {
-        working_units_with(range, camera, scratch)
+        working_units_given(range, camera, sigma, scratch)
     } else {
         WorkingUnits::identity(camera)
     }

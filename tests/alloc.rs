@@ -149,6 +149,24 @@ fn a_stream_of_abw_frames_allocates_nothing_image_sized_after_the_first() {
 }
 
 #[test]
+fn a_stream_of_staircase_frames_dequantised_too() {
+    let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let frames: Vec<RangeImage> = (0..2)
+        .map(|i| {
+            let (params, seed) = scenegen::family_image(scenegen::Family::Staircase, 1.33, false, i);
+            scenegen::generate(&params, seed).range.map(|&v| if v == 0 { f32::NAN } else { f32::from(v) })
+        })
+        .collect();
+    let mut noise = Vec::new();
+    for f in &frames {
+        assert!(rangeseg::dequantise::staircase(f, &mut noise, true).step.is_some(), "a staircase frame");
+    }
+    // After a frame that is not a staircase, too.
+    let abw = abw_frames(1).remove(0);
+    stream(&[abw, frames[0].clone(), frames[1].clone()], &Camera::ABW0, &Config::default());
+}
+
+#[test]
 fn the_paper_configuration_too() {
     let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let config = Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/paper.toml"))

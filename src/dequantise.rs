@@ -1,0 +1,383 @@
+//! Dequantisation: depth rounded to steps coarser than its noise, turned back into slopes before the stages run.
+//!
+//! A depth rounded to steps well above its noise (rendered depth, a stereo disparity or a quantiser with no noise
+//! to dither it) turns every slanted plane into a staircase of flat terraces and risers of one step. The stages
+//! see the terraces, not the plane: local planes are flat on a terrace and steep on a riser, the Canny detector
+//! fires on the risers, and region growing can join a staircase only with limits raised to one step
+//! (`regiongrow::Params::for_steps`), which then let it run across creases too. Such an image carries the slope in
+//! the terraces' shape: a terrace of a plane lies between a riser one step down and a riser one step up, and the
+//! plane crosses the terrace's stored value halfway between them. So each pixel of a terrace gets the value that
+//! a straight ramp from half a step below (at the riser down) to half a step above (at the riser up) has there,
+//! by the pixel's distances to the two risers within its terrace:
+//!
+//! `value = stored − q/2 + q · d_down / (d_down + d_up)`
+//!
+//! A terrace with a riser on one side only (cut by the image border, no data or a jump; a ridge or a valley)
+//! ramps from that riser at the slope of the terrace beyond it (one step over that terrace's width), up to half
+//! a step; a terrace with no riser (a level surface) keeps its value. The result always rounds back to the
+//! stored value (it stays within half a step of it). A difference of more than one step is a jump, not a riser,
+//! and distances do not cross it.
+//!
+//! It runs only on a staircase: an image whose depth has a uniform step (`planefit::noise::step_from_smallest`)
+//! and a noise σ (`planefit::noise::sigma_sampled`) below that step's rounding error `q / √12`, the test
+//! [`crate::units`] already makes to take the rounding as the image's noise floor. Noise at least as large as
+//! the rounding dithers the risers into noise, which the stages handle as noise; the real ABW images and the NYU
+//! frames have it (docs/method.md §2.6).
+
+use rangeimage::RangeImage;
+
+/// Stride of the rows and 5 × 5 windows the test reads (as [`crate::units`], which can reuse its σ).
+use crate::units::SAMPLE_STRIDE;
+
+/// The working memory of [`dequantise`], kept from one frame to the next.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    /// Per pixel: its distance to the nearest pixel of its terrace beside a riser down, then up.
+    down: Vec<f32>,
+    up: Vec<f32>,
+    /// Per pixel: the width of its terrace where it has both risers.
+    width: Vec<f32>,
+    /// Per pixel of a terrace with one riser: its distance to that riser, and the width of the terrace beyond.
+    ramp: Vec<f32>,
+    ramp_width: Vec<f32>,
+    /// The memory of the last dequantised image, given back by [`Scratch::recycle`].
+    values: Vec<f32>,
+}
+
+impl Scratch {
+    /// Reserves room for frames of `px` pixels (untouched memory: later frames of that size allocate nothing,
+    /// whether or not they are staircases).
+    pub fn reserve(&mut self, px: usize) {
+        for v in [
+            &mut self.down,
+            &mut self.up,
+            &mut self.width,
+            &mut self.ramp,
+            &mut self.ramp_width,
+            &mut self.values,
+        ] {
+            v.clear();
+            v.reserve(px);
+        }
+    }
+
+    /// Takes back the memory of an image [`dequantise`] returned.
+    pub fn recycle(&mut self, image: RangeImage) {
+        self.values = image.into_vec();
+    }
+}
+
+/// What [`staircase`] read from an image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Staircase {
+    /// The step `q` of the depth if the depth is a staircase (module docs): a step exists and the noise σ lies
+    /// below `q / √12`.
+    pub step: Option<f64>,
+    /// The σ it read (`planefit::noise::sigma_sampled` at [`crate::units`]'s stride), if it needed it: depth
+    /// with no step is no staircase whatever its noise.
+    pub sigma: Option<f64>,
+}
+
+/// A screen reads σ from one window in [`SCREEN_STRIDE`]² (a sixteenth of the test's windows) and ends the test
+/// when that σ is at least this many times the rounding error. On quantised depth both σ take few distinct
+/// values (medians of window residuals that are mostly 0 on a terrace): over the 220 images of the three data
+/// sets and eight artefact families, the screen read up to 1.26 times the rounding error where the test read
+/// under it (two `staircase@1.33` images).
+const SCREEN_MARGIN: f64 = 1.5;
+/// The stride of the screen's windows.
+const SCREEN_STRIDE: usize = 4 * SAMPLE_STRIDE;
+
+/// Whether `range`'s depth is a staircase (module docs). `noise` is the σ estimate's scratch memory. A caller
+/// that will not use the σ (an ABW image: its working units need none) asks for a `screen`: a coarse σ first,
+/// which rules out a noisy image at a sixteenth of the cost (then [`Staircase::sigma`] is `None`).
+#[must_use]
+pub fn staircase(range: &RangeImage, noise: &mut Vec<f64>, screen: bool) -> Staircase {
+    let none = Staircase { step: None, sigma: None };
+    let Some(smallest) = planefit::noise::smallest_difference(range, SAMPLE_STRIDE) else { return none };
+    let rounding = smallest / 12f64.sqrt();
+    if screen && planefit::noise::sigma_sampled_with(range, SCREEN_STRIDE, noise) >= SCREEN_MARGIN * rounding
+    {
+        return none;
+    }
+    let sigma = planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, noise);
+    // NaN (too few windows) is no staircase.
+    let step = if sigma < rounding {
+        planefit::noise::step_from_smallest(range, SAMPLE_STRIDE, smallest)
+    } else {
+        None
+    };
+    if let Some(step) = step {
+        tracing::debug!(step, sigma, "staircase depth: dequantised");
+    }
+    Staircase { step, sigma: Some(sigma) }
+}
+
+/// `range`, depth rounded to steps of `q`, dequantised (module docs); NaN stays NaN. The image lives in the
+/// memory of `scratch` (give it back with [`Scratch::recycle`]).
+///
+/// # Panics
+/// If `q` is not positive and finite.
+#[must_use]
+pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeImage {
+    assert!(q > 0.0 && q.is_finite(), "the step must be positive, got {q}");
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let v = range.as_slice();
+    let Scratch { down, up, width, ramp, ramp_width, values } = scratch;
+    // Distances to the risers down and up within each terrace.
+    for (dir, d) in [(-1.0, &mut *down), (1.0, &mut *up)] {
+        seed(v, (w, h), |i, j| (relation(v[i], v[j], q) == Some(dir)).then_some(0.0), d, None);
+        chamfer(v, (w, h), q, d, None);
+    }
+    // The terrace's width where it has both risers.
+    width.clear();
+    width.extend(down.iter().zip(up.iter()).map(|(&dd, &du)| dd + du));
+    let mut out = std::mem::take(values);
+    out.clear();
+    out.extend(v.iter().zip(down.iter().zip(up.iter())).map(|(&s, (&dd, &du))| {
+        if dd.is_finite() && du.is_finite() {
+            (f64::from(s) + q * (f64::from(dd) / f64::from(dd + du) - 0.5)) as f32
+        } else {
+            s
+        }
+    }));
+    // A terrace with a riser on one side only (cut by the image border, no data or a jump; a ridge or a
+    // valley): the ramp leaves its riser at the slope of the terrace beyond it, up to half a step away.
+    for (dir, near, far) in [(-1.0, &*down, &*up), (1.0, &*up, &*down)] {
+        let across = |i: usize, j: usize| {
+            (far[i].is_infinite() && relation(v[i], v[j], q) == Some(dir) && width[j].is_finite())
+                .then_some(width[j])
+        };
+        seed(v, (w, h), across, ramp, Some(ramp_width));
+        chamfer(v, (w, h), q, ramp, Some(ramp_width));
+        for (i, o) in out.iter_mut().enumerate() {
+            if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
+                let rise = (f64::from(ramp[i]) / f64::from(ramp_width[i])).min(1.0);
+                *o = (f64::from(v[i]) + dir * q * (0.5 - rise)) as f32;
+            }
+        }
+    }
+    RangeImage::from_vec(range.width(), range.height(), out).expect("one value per pixel")
+}
+
+/// How two stored values relate on a staircase of step `q`: the same terrace, a riser of one step (`±1`: the
+/// second one step above or below the first), or neither (a jump, or no data).
+#[inline]
+fn relation(a: f32, b: f32, q: f64) -> Option<f64> {
+    let d = (f64::from(b) - f64::from(a)) / q;
+    if d.abs() < 0.5 {
+        Some(0.0)
+    } else if d.abs() < 1.5 {
+        Some(d.signum())
+    } else {
+        None
+    }
+}
+
+/// Sets `d` (per pixel of `v`, `w × h`) to 0.5 at the pixels with a 4-neighbour `j` for which `riser(i, j)` gives
+/// a value (the riser lies between two pixels), +∞ elsewhere; with `carried`, the value (the smallest of the
+/// pixel's, in the order left, right, up, down) goes there, +∞ elsewhere.
+fn seed(
+    v: &[f32],
+    (w, h): (usize, usize),
+    riser: impl Fn(usize, usize) -> Option<f32>,
+    d: &mut Vec<f32>,
+    mut carried: Option<&mut Vec<f32>>,
+) {
+    d.clear();
+    d.resize(w * h, f32::INFINITY);
+    if let Some(c) = carried.as_deref_mut() {
+        c.clear();
+        c.resize(w * h, f32::INFINITY);
+    }
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if !v[i].is_finite() {
+                continue;
+            }
+            let neighbours = [
+                (x > 0, i.wrapping_sub(1)),
+                (x + 1 < w, i + 1),
+                (y > 0, i.wrapping_sub(w)),
+                (y + 1 < h, i + w),
+            ];
+            let value = neighbours.iter().filter(|n| n.0).filter_map(|&(_, j)| riser(i, j)).reduce(f32::min);
+            if let Some(value) = value {
+                d[i] = 0.5;
+                if let Some(c) = carried.as_deref_mut() {
+                    c[i] = value;
+                }
+            }
+        }
+    }
+}
+
+/// Propagates the distances `d` (per pixel of `v`, `w × h`, from [`seed`]) within each terrace of a staircase of
+/// step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus path length, and
+/// with `carried`, the carried value of the seed it came from. Two forward and backward passes: exact on
+/// terraces convex enough, an upper bound on the others.
+fn chamfer(v: &[f32], (w, h): (usize, usize), q: f64, d: &mut [f32], mut carried: Option<&mut Vec<f32>>) {
+    let diag = std::f32::consts::SQRT_2;
+    let same = |i: usize, j: usize| relation(v[i], v[j], q) == Some(0.0);
+    let mut relax = |i: usize, from: &[(bool, usize, f32)]| {
+        let mut best = (d[i], None);
+        for &(ok, j, c) in from {
+            if ok && d[j] + c < best.0 && same(i, j) {
+                best = (d[j] + c, Some(j));
+            }
+        }
+        if let (dist, Some(j)) = best {
+            d[i] = dist;
+            if let Some(c) = carried.as_deref_mut() {
+                c[i] = c[j];
+            }
+        }
+    };
+    for _ in 0..2 {
+        // Forward: from the left and the row above.
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let (l, r, u) = (x > 0, x + 1 < w, y > 0);
+                let from = [
+                    (l, i.wrapping_sub(1), 1.0),
+                    (u && l, i.wrapping_sub(w + 1), diag),
+                    (u, i.wrapping_sub(w), 1.0),
+                    (u && r, i.wrapping_sub(w).wrapping_add(1), diag),
+                ];
+                relax(i, &from);
+            }
+        }
+        // Backward: from the right and the row below.
+        for y in (0..h).rev() {
+            for x in (0..w).rev() {
+                let i = y * w + x;
+                let (l, r, b) = (x > 0, x + 1 < w, y + 1 < h);
+                let from = [
+                    (r, i + 1, 1.0),
+                    (b && r, i + w + 1, diag),
+                    (b, i + w, 1.0),
+                    (b && l, (i + w).wrapping_sub(1), diag),
+                ];
+                relax(i, &from);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Grid;
+
+    /// A deterministic pattern in [−1, 1) per pixel.
+    fn pattern(x: u32, y: u32) -> f64 {
+        f64::from((x * 7919 + y * 104_729 + (x * y) % 31) % 101) / 50.5 - 1.0
+    }
+
+    /// The plane `z(x, y)`, plus `noise` times the pattern, rounded to steps of `q`.
+    fn rounded(z: impl Fn(f64, f64) -> f64, q: f64, noise: f64) -> RangeImage {
+        Grid::from_fn(160, 120, |x, y| {
+            let v = z(f64::from(x), f64::from(y)) + noise * pattern(x, y);
+            ((v / q).round() * q) as f32
+        })
+    }
+
+    fn dequantised(img: &RangeImage, q: f64) -> RangeImage {
+        dequantise(img, q, &mut Scratch::default())
+    }
+
+    #[test]
+    fn a_staircase_becomes_its_plane_and_rounds_back_to_itself() {
+        // Risers 25 px apart across the slope.
+        let plane = |x: f64, y: f64| 100.0 + 0.11 * x + 0.045 * y;
+        let q = 3.0;
+        let img = rounded(plane, q, 0.0);
+        let out = dequantised(&img, q);
+        let (mut se_in, mut se_out, mut n) = (0.0, 0.0, 0);
+        for (x, y, &s) in img.enumerate() {
+            let o = f64::from(out[(x, y)]);
+            assert!(
+                (o - f64::from(s)).abs() <= q / 2.0 + 1e-4,
+                "({x}, {y}): {o} is not within half a step of {s}"
+            );
+            // The terraces the image border cuts included (they ramp at their neighbour's slope).
+            let t = plane(f64::from(x), f64::from(y));
+            se_in += (f64::from(s) - t).powi(2);
+            se_out += (o - t).powi(2);
+            n += 1;
+        }
+        let (rms_in, rms_out) = ((se_in / f64::from(n)).sqrt(), (se_out / f64::from(n)).sqrt());
+        assert!(rms_in > 0.25 * q, "the staircase's own error, {rms_in}");
+        assert!(rms_out < 0.05 * q, "dequantised: {rms_out} from the plane (stored: {rms_in})");
+    }
+
+    #[test]
+    fn a_ridge_keeps_its_roof() {
+        // Two planes meeting at a ridge along x = 80: the top terrace has risers down on both sides.
+        let roof = |x: f64, y: f64| 100.0 + 0.2 * (40.0 - (x - 80.0).abs()) + 0.05 * y;
+        let q = 2.0;
+        let img = rounded(roof, q, 0.0);
+        let out = dequantised(&img, q);
+        let (mut se, mut n, mut worst) = (0.0, 0, 0.0f64);
+        for (x, y, _) in img.enumerate() {
+            let e = f64::from(out[(x, y)]) - roof(f64::from(x), f64::from(y));
+            se += e * e;
+            n += 1;
+            worst = worst.max(e.abs());
+        }
+        let rms = (se / f64::from(n)).sqrt();
+        // The stored staircase is q / √12 = 0.29 q from the roof; the crest, where the two ramps meet within the
+        // top terrace, is the worst (0.36 q here, within half a step as everywhere).
+        assert!(rms < 0.1 * q, "{rms} from the roof");
+        assert!(worst <= 0.5 * q + 1e-4, "{worst} from the roof");
+    }
+
+    #[test]
+    fn jumps_and_no_data_are_kept() {
+        let q = 2.0;
+        // A ramp whose right half lies 10 steps higher, and a hole.
+        let mut img = rounded(|x, y| 50.0 + 0.1 * x + 0.02 * y + if x >= 48.0 { 20.0 } else { 0.0 }, q, 0.0);
+        for y in 20..30 {
+            for x in 10..20 {
+                img[(x, y)] = f32::NAN;
+            }
+        }
+        let out = dequantised(&img, q);
+        for (x, y, &s) in img.enumerate() {
+            let o = out[(x, y)];
+            assert_eq!(s.is_nan(), o.is_nan(), "({x}, {y})");
+            if s.is_finite() {
+                assert!((f64::from(o) - f64::from(s)).abs() <= q / 2.0 + 1e-4, "({x}, {y})");
+            }
+        }
+        // A flat terrace bordered only by a jump keeps its value.
+        let mut flat = Grid::new(40, 30, 10.0f32);
+        for y in 0..30 {
+            for x in 20..40 {
+                flat[(x, y)] = 30.0;
+            }
+        }
+        assert_eq!(dequantised(&flat, q), flat);
+    }
+
+    #[test]
+    fn only_staircases_are_dequantised() {
+        let plane = |x: f64, y: f64| 100.0 + 0.31 * x + 0.17 * y;
+        let q = 3.0;
+        let mut noise = Vec::new();
+        for screen in [false, true] {
+            let mut test = |img: &RangeImage| staircase(img, &mut noise, screen);
+            let stairs = test(&rounded(plane, q, 0.0));
+            assert_eq!(stairs.step, Some(q), "screen {screen}");
+            assert!(stairs.sigma.is_some_and(|s| s < q / 12f64.sqrt()), "screen {screen}: {stairs:?}");
+            // Noise of ±1.5 steps before the rounding dithers the risers: noise, not a staircase.
+            let noisy = test(&rounded(plane, q, 1.5 * q));
+            assert_eq!(noisy.step, None, "screen {screen}");
+            assert_eq!(noisy.sigma.is_some(), !screen, "the screen stops before the full σ");
+            // Continuous depth has no step.
+            let smooth = Grid::from_fn(160, 120, |x, y| plane(f64::from(x), f64::from(y)) as f32);
+            assert_eq!(test(&smooth).step, None, "screen {screen}");
+        }
+    }
+}
