@@ -204,6 +204,21 @@ fn pixel_cap_is_a_clear_error_and_raisable() {
     assert!(o.status.success(), "{}", stderr_of(&o));
 }
 
+#[test]
+fn info_says_which_depth_is_a_staircase() {
+    let dir = tempfile::tempdir().unwrap();
+    let (noisy, stairs) = (dir.path().join("abw.train.1.range"), dir.path().join("abw.train.2.range"));
+    write_scene(&noisy, 1);
+    let (params, seed) = scenegen::family_image(scenegen::Family::Staircase, 1.33, false, 2);
+    rangeio::abw::write_range(&stairs, &crate::range_of(&scenegen::generate(&params, seed))).unwrap();
+    let o = rangeseg(&["info".as_ref(), noisy.as_os_str(), stairs.as_os_str()]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    let (a, b) = out.split_at(out.find("abw.train.2.range").expect("both files described"));
+    assert!(a.contains("step 1.0000") && !a.contains("staircase"), "{out}");
+    assert!(b.contains("step 4.0000; a staircase") && b.contains("dequantised"), "{out}");
+}
+
 /// A 512² checkerboard of 30-px cells, each a plane of its own tilt: more regions than `.ms-seg` holds.
 fn checkerboard() -> rangeimage::Grid<u16> {
     rangeimage::Grid::from_fn(512, 512, |x, y| {

@@ -96,7 +96,14 @@ fn describe(path: &std::path::Path, f: &Frame) -> String {
     let est = planefit::noise::estimate(&f.range);
     let noise = if est.sigma.is_finite() {
         let step = est.step.map_or_else(|| "continuous".to_string(), |q| format!("step {q:.4}"));
-        format!("σ {:.4} around 5×5 planes, {step}", est.sigma)
+        // What `segment` does with it (with `pipeline.dequantise` on, as by default).
+        let stairs = rangeseg::dequantise::staircase(&f.range, &mut Vec::new(), false).step.is_some();
+        let stairs = if stairs {
+            "; a staircase (noise below the step's rounding): dequantised by segment"
+        } else {
+            ""
+        };
+        format!("σ {:.4} around 5×5 planes, {step}{stairs}", est.sigma)
     } else {
         "unknown (fewer than 20 full 5×5 windows)".into()
     };
