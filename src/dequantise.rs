@@ -35,8 +35,6 @@ pub struct Scratch {
     /// Per pixel: its distance to the nearest pixel of its terrace beside a riser down, then up.
     down: Vec<f32>,
     up: Vec<f32>,
-    /// Per pixel: the width of its terrace where it has both risers.
-    width: Vec<f32>,
     /// Per pixel of a terrace with one riser: its distance to that riser, and the width of the terrace beyond.
     ramp: Vec<f32>,
     ramp_width: Vec<f32>,
@@ -48,14 +46,7 @@ impl Scratch {
     /// Reserves room for frames of `px` pixels (untouched memory: later frames of that size allocate nothing,
     /// whether or not they are staircases).
     pub fn reserve(&mut self, px: usize) {
-        for v in [
-            &mut self.down,
-            &mut self.up,
-            &mut self.width,
-            &mut self.ramp,
-            &mut self.ramp_width,
-            &mut self.values,
-        ] {
+        for v in [&mut self.down, &mut self.up, &mut self.ramp, &mut self.ramp_width, &mut self.values] {
             v.clear();
             v.reserve(px);
         }
@@ -122,15 +113,12 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     assert!(q > 0.0 && q.is_finite(), "the step must be positive, got {q}");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let v = range.as_slice();
-    let Scratch { down, up, width, ramp, ramp_width, values } = scratch;
+    let Scratch { down, up, ramp, ramp_width, values } = scratch;
     // Distances to the risers down and up within each terrace.
     for (dir, d) in [(-1.0, &mut *down), (1.0, &mut *up)] {
         seed(v, (w, h), |i, j| (relation(v[i], v[j], q) == Some(dir)).then_some(0.0), d, None);
         chamfer(v, (w, h), q, d, None);
     }
-    // The terrace's width where it has both risers.
-    width.clear();
-    width.extend(down.iter().zip(up.iter()).map(|(&dd, &du)| dd + du));
     let mut out = std::mem::take(values);
     out.clear();
     out.extend(v.iter().zip(down.iter().zip(up.iter())).map(|(&s, (&dd, &du))| {
@@ -143,9 +131,11 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     // A terrace with a riser on one side only (cut by the image border, no data or a jump; a ridge or a
     // valley): the ramp leaves its riser at the slope of the terrace beyond it, up to half a step away.
     for (dir, near, far) in [(-1.0, &*down, &*up), (1.0, &*up, &*down)] {
+        // Seeds: its pixels beside the riser, carrying the width of the terrace beyond where it has both risers.
         let across = |i: usize, j: usize| {
-            (far[i].is_infinite() && relation(v[i], v[j], q) == Some(dir) && width[j].is_finite())
-                .then_some(width[j])
+            let width = down[j] + up[j];
+            (far[i].is_infinite() && relation(v[i], v[j], q) == Some(dir) && width.is_finite())
+                .then_some(width)
         };
         seed(v, (w, h), across, ramp, Some(ramp_width));
         chamfer(v, (w, h), q, ramp, Some(ramp_width));

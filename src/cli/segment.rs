@@ -49,10 +49,12 @@ const RANGE_EXTENSIONS: &[&str] = &["range", "png", "pgm", "tif", "tiff", "pcd"]
 const OWN_OUTPUTS: &[&str] = &[".c1.png", ".c2.png", ".edges.png", ".regions.png", ".labels.png"];
 
 /// Peak memory of the pipeline per pixel of the input, in bytes, as `segment` reserves it: the peak
-/// resident size of `rangeseg segment` on one image less that of the process on a tiny one, divided by
-/// the pixels, measured 73–74 bytes per pixel on 512², 2048² and 4096² scenes of tilted planes (see
-/// README, Limits), rounded up to 100 for images with more edges and regions than those.
-pub(crate) const PEAK_BYTES_PER_PIXEL: u64 = 100;
+/// resident size of `rangeseg segment -j 1` on one image less that of the process on a tiny one, divided by
+/// the pixels. Measured 2026-12-04 on ABW rasterfiles of two tilted planes, 512² to 4096², with and without
+/// noise: 152 bytes per pixel, 172 where the depth is a staircase that is dequantised (its five extra
+/// per-pixel maps); rounded up to 200 for images with more edges and regions than those. (It was 73–74 when
+/// first measured, before the stages kept their working buffers from frame to frame.)
+pub(crate) const PEAK_BYTES_PER_PIXEL: u64 = 200;
 
 /// The memory budget when `/proc/meminfo` cannot be read: 4 GiB.
 const FALLBACK_BUDGET: u64 = 4 << 30;
