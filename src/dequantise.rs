@@ -24,7 +24,7 @@
 //! the rounding dithers the risers into noise, which the stages handle as noise; the real ABW images and the NYU
 //! frames have it (docs/method.md §2.6).
 
-use rangeimage::RangeImage;
+use rangeimage::{Camera, RangeImage};
 
 /// Stride of the rows and 5 × 5 windows the test reads (as [`crate::units`], which can reuse its σ).
 use crate::units::SAMPLE_STRIDE;
@@ -101,6 +101,29 @@ pub fn staircase(range: &RangeImage, noise: &mut Vec<f64>, screen: bool) -> Stai
         tracing::debug!(step, sigma, "staircase depth: dequantised");
     }
     Staircase { step, sigma: Some(sigma) }
+}
+
+/// What the pipeline runs `range` (seen through `camera`) on under `config`: the image dequantised if it is a
+/// staircase and `pipeline.dequantise` is on (`None`: the image as it is), and the σ the test read when it did not
+/// dequantise (for the working units, which read the same σ: `None` if the test read none). `noise` is the σ
+/// estimate's scratch memory. [`crate::pipeline::Segmenter`] and [`crate::units::in_working_units`] both call it.
+pub fn for_config(
+    range: &RangeImage,
+    camera: &Camera,
+    config: &crate::Config,
+    noise: &mut Vec<f64>,
+    scratch: &mut Scratch,
+) -> (Option<RangeImage>, Option<f64>) {
+    if !config.pipeline.dequantise {
+        return (None, None);
+    }
+    // An ABW image's working units need no σ, nor do any without working units: screen first.
+    let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
+    let stairs = staircase(range, noise, screen);
+    match stairs.step {
+        Some(q) => (Some(dequantise(range, q, scratch)), None),
+        None => (None, stairs.sigma),
+    }
 }
 
 /// `range`, depth rounded to steps of `q`, dequantised (module docs); NaN stays NaN. The image lives in the

@@ -142,12 +142,7 @@ impl Segmenter {
             let windows = (range.width() as usize / stride + 1) * (range.height() as usize / stride + 1);
             scratch.noise.clear();
             scratch.noise.reserve(windows);
-            let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
-            let stairs = crate::dequantise::staircase(range, &mut scratch.noise, screen);
-            match stairs.step {
-                Some(q) => (Some(crate::dequantise::dequantise(range, q, &mut scratch.dequantise)), None),
-                None => (None, stairs.sigma),
-            }
+            crate::dequantise::for_config(range, camera, config, &mut scratch.noise, &mut scratch.dequantise)
         } else {
             (None, None)
         };

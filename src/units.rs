@@ -133,20 +133,26 @@ pub fn for_config_given(
     }
 }
 
-/// `range` and `camera` in the working units `config` asks for (borrowed when they are the image's own):
-/// what [`crate::pipeline::Segmenter`] runs the stages on, for callers that run single stages.
+/// `range` and `camera` in the working units `config` asks for (borrowed when they are the image's own), and
+/// dequantised first if it is a staircase ([`crate::dequantise`]): what [`crate::pipeline::Segmenter`] runs the
+/// stages on, for callers that run single stages.
 #[must_use]
 pub fn in_working_units<'a>(
     range: &'a RangeImage,
     camera: &Camera,
     config: &crate::Config,
 ) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
-    let units = for_config(range, camera, config, &mut Vec::new());
+    let mut noise = Vec::new();
+    let (dequantised, sigma) =
+        crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
+    let input = dequantised.as_ref().unwrap_or(range);
+    let units = for_config_given(input, camera, config, sigma, &mut noise);
     if units.is_identity() {
-        return (std::borrow::Cow::Borrowed(range), units.camera);
+        let out = dequantised.map_or(std::borrow::Cow::Borrowed(range), std::borrow::Cow::Owned);
+        return (out, units.camera);
     }
     let mut out = RangeImage::default();
-    units.scale_into(range, &mut out);
+    units.scale_into(input, &mut out);
     (std::borrow::Cow::Owned(out), units.camera)
 }
 
@@ -236,5 +242,23 @@ mod tests {
         assert_eq!(planefit::noise::smallest_step(&img, SAMPLE_STRIDE), None, "no uniform step");
         let u = working_units(&img, &Camera::Grid);
         assert!((u.factor - GRID_SIGMA_BAND.1 / (4.0 / 12f64.sqrt())).abs() < 1e-12, "{u:?}");
+    }
+
+    #[test]
+    fn single_stages_run_on_the_dequantised_staircase_as_the_pipeline_does() {
+        let img: RangeImage = Grid::from_fn(160, 120, |x, y| {
+            let v = 100.0 + 0.31 * f64::from(x) + 0.17 * f64::from(y);
+            ((v / 3.0).round() * 3.0) as f32
+        });
+        let config = crate::Config::default();
+        let (range, camera) = in_working_units(&img, &Camera::ABW0, &config);
+        let expected = crate::dequantise::dequantise(&img, 3.0, &mut Default::default());
+        assert!(matches!(range, std::borrow::Cow::Owned(_)) && *range == expected && *range != img);
+        assert_eq!(camera, Camera::ABW0);
+        let off = crate::Config {
+            pipeline: crate::PipelineParams { dequantise: false, ..config.pipeline },
+            ..config
+        };
+        assert!(matches!(in_working_units(&img, &Camera::ABW0, &off).0, std::borrow::Cow::Borrowed(_)));
     }
 }
