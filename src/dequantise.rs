@@ -103,9 +103,7 @@ pub fn staircase(range: &RangeImage, noise: &mut Vec<f64>, screen: bool) -> Stai
     Staircase { step, sigma: Some(sigma) }
 }
 
-/// What the pipeline runs `range` (seen through `camera`) on under `config`: the image dequantised if it is a
-/// staircase and `pipeline.dequantise` is on (`None`: the image as it is), and the σ the test read when it did not
-/// dequantise (for the working units, which read the same σ: `None` if the test read none). `noise` is the σ
+/// What the pipeline runs `range` (seen through `camera`) on under `config` ([`Prepared`]). `noise` is the σ
 /// estimate's scratch memory. [`crate::pipeline::Segmenter`] and [`crate::units::in_working_units`] both call it.
 pub fn for_config(
     range: &RangeImage,
@@ -113,17 +111,29 @@ pub fn for_config(
     config: &crate::Config,
     noise: &mut Vec<f64>,
     scratch: &mut Scratch,
-) -> (Option<RangeImage>, Option<f64>) {
+) -> Prepared {
     if !config.pipeline.dequantise {
-        return (None, None);
+        return Prepared { image: None, step: None, sigma: None };
     }
     // An ABW image's working units need no σ, nor do any without working units: screen first.
     let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
     let stairs = staircase(range, noise, screen);
     match stairs.step {
-        Some(q) => (Some(dequantise(range, q, scratch)), None),
-        None => (None, stairs.sigma),
+        Some(q) => Prepared { image: Some(dequantise(range, q, scratch)), step: Some(q), sigma: None },
+        None => Prepared { image: None, step: None, sigma: stairs.sigma },
     }
+}
+
+/// What [`for_config`] prepared an image as.
+#[derive(Debug)]
+pub struct Prepared {
+    /// The image dequantised, if it is a staircase and `pipeline.dequantise` is on (`None`: as it is).
+    pub image: Option<RangeImage>,
+    /// Its step, when dequantised.
+    pub step: Option<f64>,
+    /// The σ the test read when it did not dequantise (for the working units, which read the same σ; `None` if
+    /// the test read none).
+    pub sigma: Option<f64>,
 }
 
 /// `range`, depth rounded to steps of `q`, dequantised (module docs); NaN stays NaN. The image lives in the

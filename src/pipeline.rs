@@ -39,6 +39,9 @@ pub struct Output {
     /// The image's working units ([`crate::units`]): `features`, the regions' plane offsets and RMS and the
     /// final regions' planes are in units of depth × `units.factor`; labels, edges and normals do not depend on it.
     pub units: Option<WorkingUnits>,
+    /// The step of the depth if it was a staircase, dequantised before the stages ran ([`crate::dequantise`]);
+    /// `features` and the planes then describe the dequantised depth.
+    pub dequantised: Option<f64>,
 }
 
 /// What the last stage produces: relaxed edges and the final segmentation.
@@ -135,7 +138,7 @@ impl Segmenter {
         let t = Instant::now();
         // A staircase (depth rounded to steps above its noise) runs dequantised, in working units of its own;
         // other images reuse the σ the test read.
-        let (dequantised, sigma) = if config.pipeline.dequantise {
+        let prepared = if config.pipeline.dequantise {
             scratch.dequantise.reserve(range.len());
             // Room for the σ of every sampled window, whether or not this frame's test reads them all.
             let stride = crate::units::SAMPLE_STRIDE;
@@ -144,8 +147,9 @@ impl Segmenter {
             scratch.noise.reserve(windows);
             crate::dequantise::for_config(range, camera, config, &mut scratch.noise, &mut scratch.dequantise)
         } else {
-            (None, None)
+            crate::dequantise::Prepared { image: None, step: None, sigma: None }
         };
+        let (dequantised, sigma) = (prepared.image, prepared.sigma);
         let range = dequantised.as_ref().unwrap_or(range);
         let units = crate::units::for_config_given(range, camera, config, sigma, &mut scratch.noise);
         let mut work = std::mem::take(&mut scratch.work);
@@ -189,6 +193,7 @@ impl Segmenter {
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
         out.units = Some(units);
+        out.dequantised = prepared.step;
         scratch.work = work;
         if let Some(d) = dequantised {
             scratch.dequantise.recycle(d);

@@ -143,10 +143,10 @@ pub fn in_working_units<'a>(
     config: &crate::Config,
 ) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
     let mut noise = Vec::new();
-    let (dequantised, sigma) =
-        crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
+    let prepared = crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
+    let dequantised = prepared.image;
     let input = dequantised.as_ref().unwrap_or(range);
-    let units = for_config_given(input, camera, config, sigma, &mut noise);
+    let units = for_config_given(input, camera, config, prepared.sigma, &mut noise);
     if units.is_identity() {
         let out = dequantised.map_or(std::borrow::Cow::Borrowed(range), std::borrow::Cow::Owned);
         return (out, units.camera);

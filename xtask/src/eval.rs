@@ -148,6 +148,7 @@ fn evaluate_one(
         relax_energy_after: out.fin.relax_info.energy_after,
         noise_sigma: noise.sigma,
         noise_step: noise.step,
+        dequantised: out.dequantised,
         figure: fig_path,
     })
 }

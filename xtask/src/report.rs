@@ -30,6 +30,8 @@ pub(crate) struct ImageRow {
     pub(crate) noise_sigma: f64,
     /// The image's depth quantisation step, if any.
     pub(crate) noise_step: Option<f64>,
+    /// The step, if the pipeline dequantised the image as a staircase (`rangeseg::dequantise`).
+    pub(crate) dequantised: Option<f64>,
     #[serde(skip)]
     pub(crate) figure: PathBuf,
 }
@@ -305,11 +307,13 @@ fn per_image_table(rows: &[ImageRow]) -> Table {
     )
 }
 
-/// `σ / step` of an image's depth noise estimate (`—` where there is no step or too little data).
+/// `σ / step` of an image's depth noise estimate (`—` where there is no step or too little data), and whether
+/// the pipeline dequantised it.
 fn noise_cell(x: &ImageRow) -> String {
     let sigma = if x.noise_sigma.is_nan() { "—".to_string() } else { format!("{:.2}", x.noise_sigma) };
     let step = x.noise_step.map_or_else(|| "—".to_string(), |q| format!("{q:.3}"));
-    format!("{sigma} / {step}")
+    let stairs = if x.dequantised.is_some() { ", dequantised" } else { "" };
+    format!("{sigma} / {step}{stairs}")
 }
 
 /// The range of the images' noise estimates, e.g. `depth σ 0.55–0.81, step 1.000`.
@@ -321,10 +325,14 @@ fn noise_range(rows: &[ImageRow]) -> String {
         rows.iter().map(|x| x.noise_step.map_or_else(|| "none".to_string(), |q| format!("{q:.3}"))).collect();
     steps.sort();
     steps.dedup();
+    let stairs = match rows.iter().filter(|x| x.dequantised.is_some()).count() {
+        0 => String::new(),
+        n => format!(", {n} of {} dequantised (staircases)", rows.len()),
+    };
     if sig.is_empty() {
-        format!("depth σ —, step {}", steps.join("/"))
+        format!("depth σ —, step {}{stairs}", steps.join("/"))
     } else {
-        format!("depth σ {lo:.2}–{hi:.2}, step {}", steps.join("/"))
+        format!("depth σ {lo:.2}–{hi:.2}, step {}{stairs}", steps.join("/"))
     }
 }
 
@@ -492,14 +500,14 @@ pub(crate) fn summary(r: &Report) -> String {
 /// One CSV line per image with the main figures.
 fn csv(r: &Report) -> String {
     let mut s = String::from(
-        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms,noise_sigma,noise_step\n",
+        "image,raw_f,raw_pp_c1,c2_f,c2_pp_c1,c1_f,relaxed_f,relaxed_pp_c1,gt_regions,rg_correct,rg_over,rg_under,rg_missed,rg_noise,correct,over,under,missed,noise,angle_error_deg,rg_jin_detected,jin_detected,features_ms,regiongrow_ms,vcanny_ms,relax_ms,total_ms,noise_sigma,noise_step,dequantised_step\n",
     );
     for x in &r.rows {
         let s_ = &x.scores;
         let (h, g) = (&s_.hoover_final, &s_.hoover_regiongrow);
         let _ = writeln!(
             s,
-            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{}",
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{},{},{},{},{},{},{},{},{},{},{:.3},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{},{}",
             x.stem,
             s_.raw_canny.matched.f,
             opt(s_.raw_canny.paper_precision_c1),
@@ -528,7 +536,8 @@ fn csv(r: &Report) -> String {
             x.timings.relax,
             x.total_ms,
             x.noise_sigma,
-            x.noise_step.map_or_else(String::new, |q| format!("{q:.4}"))
+            x.noise_step.map_or_else(String::new, |q| format!("{q:.4}")),
+            x.dequantised.map_or_else(String::new, |q| format!("{q:.4}"))
         );
     }
     s
