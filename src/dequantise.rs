@@ -148,10 +148,30 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     let v = range.as_slice();
     let Scratch { down, up, ramp, ramp_width, values } = scratch;
     // Distances to the risers down and up within each terrace.
-    for (dir, d) in [(-1.0, &mut *down), (1.0, &mut *up)] {
-        seed(v, (w, h), |i, j| (relation(v[i], v[j], q) == Some(dir)).then_some(0.0), d, None);
-        chamfer(v, (w, h), q, d, None);
+    // Seeds: the pixels beside a riser down, and beside a riser up.
+    for d in [&mut *down, &mut *up] {
+        d.clear();
+        d.resize(w * h, f32::INFINITY);
     }
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let neighbours = [
+                (x > 0, i.wrapping_sub(1)),
+                (x + 1 < w, i + 1),
+                (y > 0, i.wrapping_sub(w)),
+                (y + 1 < h, i + w),
+            ];
+            for (ok, j) in neighbours {
+                match relation(v[i], if ok { v[j] } else { f32::NAN }, q) {
+                    Some(-1.0) => down[i] = 0.5,
+                    Some(1.0) => up[i] = 0.5,
+                    _ => {}
+                }
+            }
+        }
+    }
+    chamfer(v, (w, h), q, [down.as_mut_slice(), up.as_mut_slice()], None);
     let mut out = std::mem::take(values);
     out.clear();
     out.extend(v.iter().zip(down.iter().zip(up.iter())).map(|(&s, (&dd, &du))| {
@@ -170,8 +190,10 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
             (far[i].is_infinite() && relation(v[i], v[j], q) == Some(dir) && width.is_finite())
                 .then_some(width)
         };
-        seed(v, (w, h), across, ramp, Some(ramp_width));
-        chamfer(v, (w, h), q, ramp, Some(ramp_width));
+        // Only pixels beside the near riser, in terraces without a far one, can be seeds.
+        seed(v, (w, h), |i| near[i] != 0.5 || far[i].is_finite(), across, ramp, ramp_width);
+        // Only terraces without a riser on the far side take part (no other pixel has a seed in its terrace).
+        chamfer(v, (w, h), q, [ramp.as_mut_slice()], Some((ramp_width.as_mut_slice(), far)));
         for (i, o) in out.iter_mut().enumerate() {
             if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
                 let rise = (f64::from(ramp[i]) / f64::from(ramp_width[i])).min(1.0);
@@ -186,36 +208,38 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
 /// second one step above or below the first), or neither (a jump, or no data).
 #[inline]
 fn relation(a: f32, b: f32, q: f64) -> Option<f64> {
-    let d = (f64::from(b) - f64::from(a)) / q;
-    if d.abs() < 0.5 {
+    // Compared with multiples of q rather than divided by it: the same decisions on quantised depth, whose
+    // differences are whole multiples of q (or, for nearly uniform steps, at least half of it), at a fraction of
+    // the cost.
+    let d = f64::from(b) - f64::from(a);
+    if d.abs() < 0.5 * q {
         Some(0.0)
-    } else if d.abs() < 1.5 {
+    } else if d.abs() < 1.5 * q {
         Some(d.signum())
     } else {
         None
     }
 }
 
-/// Sets `d` (per pixel of `v`, `w × h`) to 0.5 at the pixels with a 4-neighbour `j` for which `riser(i, j)` gives
-/// a value (the riser lies between two pixels), +∞ elsewhere; with `carried`, the value (the smallest of the
-/// pixel's, in the order left, right, up, down) goes there, +∞ elsewhere.
+/// Sets `d` (per pixel of `v`, `w × h`) to 0.5 at the pixels (but those `skip` names) with a 4-neighbour `j` for
+/// which `riser(i, j)` gives a value (the riser lies between two pixels), +∞ elsewhere; `carried` gets that value
+/// (the smallest of the pixel's, in the order left, right, up, down) there, +∞ elsewhere.
 fn seed(
     v: &[f32],
     (w, h): (usize, usize),
+    skip: impl Fn(usize) -> bool,
     riser: impl Fn(usize, usize) -> Option<f32>,
     d: &mut Vec<f32>,
-    mut carried: Option<&mut Vec<f32>>,
+    carried: &mut Vec<f32>,
 ) {
-    d.clear();
-    d.resize(w * h, f32::INFINITY);
-    if let Some(c) = carried.as_deref_mut() {
-        c.clear();
-        c.resize(w * h, f32::INFINITY);
+    for m in [&mut *d, &mut *carried] {
+        m.clear();
+        m.resize(w * h, f32::INFINITY);
     }
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
-            if !v[i].is_finite() {
+            if skip(i) || !v[i].is_finite() {
                 continue;
             }
             let neighbours = [
@@ -227,64 +251,128 @@ fn seed(
             let value = neighbours.iter().filter(|n| n.0).filter_map(|&(_, j)| riser(i, j)).reduce(f32::min);
             if let Some(value) = value {
                 d[i] = 0.5;
-                if let Some(c) = carried.as_deref_mut() {
-                    c[i] = value;
+                carried[i] = value;
+            }
+        }
+    }
+}
+
+/// Propagates the distance maps `maps` (per pixel of `v`, `w × h`, from [`seed`]) within each terrace of a
+/// staircase of step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus
+/// path length. With `carried = (values, far)`, the one map carries `values` from the seed it came from, and only
+/// pixels whose `far` distance is +∞ (terraces without a riser on the far side) take part. Two forward and
+/// backward passes: exact on terraces convex enough, an upper bound on the others. The maps share the terrace
+/// tests; each relaxes as it would alone.
+fn chamfer<const N: usize>(
+    v: &[f32],
+    (w, h): (usize, usize),
+    q: f64,
+    mut maps: [&mut [f32]; N],
+    carried: Option<(&mut [f32], &[f32])>,
+) {
+    let diag = std::f32::consts::SQRT_2;
+    let half = 0.5 * q;
+    let (mut values, far) = match carried {
+        Some((values, far)) => (Some(values), Some(far)),
+        None => (None, None),
+    };
+    for _ in 0..2 {
+        // Forward: from the left and the row above (in that order).
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if takes_part(v, far, i) {
+                    let mut from = [(0, 0.0); 4];
+                    let mut n = 0;
+                    let mut push = |j: usize, c: f32| {
+                        from[n] = (j, c);
+                        n += 1;
+                    };
+                    if x > 0 {
+                        push(i - 1, 1.0);
+                    }
+                    if y > 0 {
+                        if x > 0 {
+                            push(i - w - 1, diag);
+                        }
+                        push(i - w, 1.0);
+                        if x + 1 < w {
+                            push(i - w + 1, diag);
+                        }
+                    }
+                    relax(v, half, i, &from[..n], &mut maps, values.as_deref_mut());
+                }
+            }
+        }
+        // Backward: from the right and the row below (in that order).
+        for y in (0..h).rev() {
+            for x in (0..w).rev() {
+                let i = y * w + x;
+                if takes_part(v, far, i) {
+                    let mut from = [(0, 0.0); 4];
+                    let mut n = 0;
+                    let mut push = |j: usize, c: f32| {
+                        from[n] = (j, c);
+                        n += 1;
+                    };
+                    if x + 1 < w {
+                        push(i + 1, 1.0);
+                    }
+                    if y + 1 < h {
+                        if x + 1 < w {
+                            push(i + w + 1, diag);
+                        }
+                        push(i + w, 1.0);
+                        if x > 0 {
+                            push(i + w - 1, diag);
+                        }
+                    }
+                    relax(v, half, i, &from[..n], &mut maps, values.as_deref_mut());
                 }
             }
         }
     }
 }
 
-/// Propagates the distances `d` (per pixel of `v`, `w × h`, from [`seed`]) within each terrace of a staircase of
-/// step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus path length, and
-/// with `carried`, the carried value of the seed it came from. Two forward and backward passes: exact on
-/// terraces convex enough, an upper bound on the others.
-fn chamfer(v: &[f32], (w, h): (usize, usize), q: f64, d: &mut [f32], mut carried: Option<&mut Vec<f32>>) {
-    let diag = std::f32::consts::SQRT_2;
-    let same = |i: usize, j: usize| relation(v[i], v[j], q) == Some(0.0);
-    let mut relax = |i: usize, from: &[(bool, usize, f32)]| {
-        let mut best = (d[i], None);
-        for &(ok, j, c) in from {
-            if ok && d[j] + c < best.0 && same(i, j) {
-                best = (d[j] + c, Some(j));
+/// Whether pixel `i` takes part in [`chamfer`]: it holds data and, with `far`, its terrace has no far riser.
+#[inline(always)]
+fn takes_part(v: &[f32], far: Option<&[f32]>, i: usize) -> bool {
+    v[i].is_finite() && far.is_none_or(|f| f[i].is_infinite())
+}
+
+/// One pixel `i` of [`chamfer`]: per map, the first neighbour of `from` (index, step length) in its terrace that
+/// offers a shorter path; `values`, if any, follows the (one) map.
+#[inline(always)]
+fn relax<const N: usize>(
+    v: &[f32],
+    half: f64,
+    i: usize,
+    from: &[(usize, f32)],
+    maps: &mut [&mut [f32]; N],
+    values: Option<&mut [f32]>,
+) {
+    let vi = f64::from(v[i]);
+    let mut best: [f32; N] = std::array::from_fn(|k| maps[k][i]);
+    let mut src = [usize::MAX; N];
+    for &(j, c) in from {
+        if (f64::from(v[j]) - vi).abs() < half {
+            for k in 0..N {
+                let through = maps[k][j] + c;
+                if through < best[k] {
+                    (best[k], src[k]) = (through, j);
+                }
             }
         }
-        if let (dist, Some(j)) = best {
-            d[i] = dist;
-            if let Some(c) = carried.as_deref_mut() {
-                c[i] = c[j];
-            }
+    }
+    for k in 0..N {
+        if src[k] != usize::MAX {
+            maps[k][i] = best[k];
         }
-    };
-    for _ in 0..2 {
-        // Forward: from the left and the row above.
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let (l, r, u) = (x > 0, x + 1 < w, y > 0);
-                let from = [
-                    (l, i.wrapping_sub(1), 1.0),
-                    (u && l, i.wrapping_sub(w + 1), diag),
-                    (u, i.wrapping_sub(w), 1.0),
-                    (u && r, i.wrapping_sub(w).wrapping_add(1), diag),
-                ];
-                relax(i, &from);
-            }
-        }
-        // Backward: from the right and the row below.
-        for y in (0..h).rev() {
-            for x in (0..w).rev() {
-                let i = y * w + x;
-                let (l, r, b) = (x > 0, x + 1 < w, y + 1 < h);
-                let from = [
-                    (r, i + 1, 1.0),
-                    (b && r, i + w + 1, diag),
-                    (b, i + w, 1.0),
-                    (b && l, (i + w).wrapping_sub(1), diag),
-                ];
-                relax(i, &from);
-            }
-        }
+    }
+    if let Some(values) = values
+        && src[0] != usize::MAX
+    {
+        values[i] = values[src[0]];
     }
 }
 

@@ -185,6 +185,7 @@ pub fn write_selected_outputs(
         "format": frame.format.to_string(),
         "width": frame.range.width(),
         "height": frame.range.height(),
+        "dequantised_step": out.dequantised,
         "regions_grown": out.regions.regions.len(),
         "regions_final": out.fin.final_regions.len(),
         "regions_written": cap.map(|c| c.0),
