@@ -149,20 +149,11 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     let Scratch { down, up, ramp, ramp_width, values } = scratch;
     // Distances to the risers down and up within each terrace.
     // Seeds: the pixels beside a riser down, and beside a riser up.
-    for d in [&mut *down, &mut *up] {
-        d.clear();
-        d.resize(w * h, f32::INFINITY);
-    }
+    unreached([&mut *down, &mut *up], w * h);
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
-            let neighbours = [
-                (x > 0, i.wrapping_sub(1)),
-                (x + 1 < w, i + 1),
-                (y > 0, i.wrapping_sub(w)),
-                (y + 1 < h, i + w),
-            ];
-            for (ok, j) in neighbours {
+            for (ok, j) in four_neighbours((x, y), (w, h)) {
                 match relation(v[i], if ok { v[j] } else { f32::NAN }, q) {
                     Some(-1.0) => down[i] = 0.5,
                     Some(1.0) => up[i] = 0.5,
@@ -221,6 +212,22 @@ fn relation(a: f32, b: f32, q: f64) -> Option<f64> {
     }
 }
 
+/// Makes each map `n` values of +∞ (no seed reached yet), reusing its memory.
+fn unreached(maps: [&mut Vec<f32>; 2], n: usize) {
+    for m in maps {
+        m.clear();
+        m.resize(n, f32::INFINITY);
+    }
+}
+
+/// The 4-neighbours of pixel `(x, y)` of a `w × h` image, left, right, up, down: whether each lies inside, and
+/// its index (meaningless where it does not).
+#[inline(always)]
+fn four_neighbours((x, y): (usize, usize), (w, h): (usize, usize)) -> [(bool, usize); 4] {
+    let i = y * w + x;
+    [(x > 0, i.wrapping_sub(1)), (x + 1 < w, i + 1), (y > 0, i.wrapping_sub(w)), (y + 1 < h, i + w)]
+}
+
 /// Sets `d` (per pixel of `v`, `w × h`) to 0.5 at the pixels (but those `skip` names) with a 4-neighbour `j` for
 /// which `riser(i, j)` gives a value (the riser lies between two pixels), +∞ elsewhere; `carried` gets that value
 /// (the smallest of the pixel's, in the order left, right, up, down) there, +∞ elsewhere.
@@ -232,22 +239,14 @@ fn seed(
     d: &mut Vec<f32>,
     carried: &mut Vec<f32>,
 ) {
-    for m in [&mut *d, &mut *carried] {
-        m.clear();
-        m.resize(w * h, f32::INFINITY);
-    }
+    unreached([&mut *d, &mut *carried], w * h);
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
             if skip(i) || !v[i].is_finite() {
                 continue;
             }
-            let neighbours = [
-                (x > 0, i.wrapping_sub(1)),
-                (x + 1 < w, i + 1),
-                (y > 0, i.wrapping_sub(w)),
-                (y + 1 < h, i + w),
-            ];
+            let neighbours = four_neighbours((x, y), (w, h));
             let value = neighbours.iter().filter(|n| n.0).filter_map(|&(_, j)| riser(i, j)).reduce(f32::min);
             if let Some(value) = value {
                 d[i] = 0.5;
@@ -277,54 +276,28 @@ fn chamfer<const N: usize>(
         None => (None, None),
     };
     for _ in 0..2 {
-        // Forward: from the left and the row above (in that order).
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                if takes_part(v, far, i) {
+        // Forward (from the left and the row above, in that order), then backward (from the right and the row
+        // below): the backward pass is the forward one on the image turned half a turn.
+        for forward in [true, false] {
+            for ym in 0..h {
+                for xm in 0..w {
+                    let (x, y) = if forward { (xm, ym) } else { (w - 1 - xm, h - 1 - ym) };
+                    let i = y * w + x;
+                    if !takes_part(v, far, i) {
+                        continue;
+                    }
+                    let at = |k: usize| if forward { i - k } else { i + k };
                     let mut from = [(0, 0.0); 4];
                     let mut n = 0;
-                    let mut push = |j: usize, c: f32| {
-                        from[n] = (j, c);
-                        n += 1;
-                    };
-                    if x > 0 {
-                        push(i - 1, 1.0);
-                    }
-                    if y > 0 {
-                        if x > 0 {
-                            push(i - w - 1, diag);
-                        }
-                        push(i - w, 1.0);
-                        if x + 1 < w {
-                            push(i - w + 1, diag);
-                        }
-                    }
-                    relax(v, half, i, &from[..n], &mut maps, values.as_deref_mut());
-                }
-            }
-        }
-        // Backward: from the right and the row below (in that order).
-        for y in (0..h).rev() {
-            for x in (0..w).rev() {
-                let i = y * w + x;
-                if takes_part(v, far, i) {
-                    let mut from = [(0, 0.0); 4];
-                    let mut n = 0;
-                    let mut push = |j: usize, c: f32| {
-                        from[n] = (j, c);
-                        n += 1;
-                    };
-                    if x + 1 < w {
-                        push(i + 1, 1.0);
-                    }
-                    if y + 1 < h {
-                        if x + 1 < w {
-                            push(i + w + 1, diag);
-                        }
-                        push(i + w, 1.0);
-                        if x > 0 {
-                            push(i + w - 1, diag);
+                    for (inside, k, c) in [
+                        (xm > 0, 1, 1.0),
+                        (ym > 0 && xm > 0, w + 1, diag),
+                        (ym > 0, w, 1.0),
+                        (ym > 0 && xm + 1 < w, w - 1, diag),
+                    ] {
+                        if inside {
+                            from[n] = (at(k), c);
+                            n += 1;
                         }
                     }
                     relax(v, half, i, &from[..n], &mut maps, values.as_deref_mut());
