@@ -18,7 +18,7 @@
 //! stored value (it stays within half a step of it). A difference of more than one step is a jump, not a riser,
 //! and distances do not cross it.
 //!
-//! It runs only on a staircase: an image whose depth has a uniform step (`planefit::noise::step_from_smallest`)
+//! It runs only on a staircase: an image whose depth has a step, uniform or nearly (`planefit::noise::step_from_smallest`),
 //! and a noise σ (`planefit::noise::sigma_sampled`) below that step's rounding error `q / √12`, the test
 //! [`crate::units`] already makes to take the rounding as the image's noise floor. Noise at least as large as
 //! the rounding dithers the risers into noise, which the stages handle as noise; the real ABW images and the NYU
@@ -62,7 +62,8 @@ impl Scratch {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Staircase {
     /// The step `q` of the depth if the depth is a staircase (module docs): a step exists and the noise σ lies
-    /// below `q / √12`.
+    /// below the rounding error of the smallest difference between neighbours, `d / √12` (`d = q` for a uniform
+    /// step; for a nearly uniform one, the lower riser).
     pub step: Option<f64>,
     /// The σ it read (`planefit::noise::sigma_sampled` at [`crate::units`]'s stride), if it needed it: depth
     /// with no step is no staircase whatever its noise.
