@@ -40,7 +40,8 @@ pub struct Output {
     /// final regions' planes are in units of depth × `units.factor`; labels, edges and normals do not depend on it.
     pub units: Option<WorkingUnits>,
     /// The step of the depth if it was a staircase, dequantised before the stages ran ([`crate::dequantise`]);
-    /// `features` and the planes then describe the dequantised depth.
+    /// `features` and the regions' planes then describe the dequantised depth (`rangeseg::planes` fits the input
+    /// as given).
     pub dequantised: Option<f64>,
 }
 
