@@ -106,6 +106,8 @@ pub fn staircase(range: &RangeImage, noise: &mut Vec<f64>, screen: bool) -> Stai
 
 /// What the pipeline runs `range` (seen through `camera`) on under `config` ([`Prepared`]). `noise` is the σ
 /// estimate's scratch memory. [`crate::pipeline::Segmenter`] and [`crate::units::in_working_units`] both call it.
+/// With `pipeline.dequantise` on, `noise` and `scratch` first get room for a frame of this size, whether or not
+/// it is a staircase, so that a stream of frames allocates nothing image-sized after its first.
 pub fn for_config(
     range: &RangeImage,
     camera: &Camera,
@@ -114,24 +116,29 @@ pub fn for_config(
     scratch: &mut Scratch,
 ) -> Prepared {
     if !config.pipeline.dequantise {
-        return Prepared { image: None, step: None, sigma: None };
+        return Prepared::default();
     }
+    scratch.reserve(range.len());
+    // Room for the σ of every sampled window, whether or not this frame's test reads them all.
+    let windows =
+        (range.width() as usize / SAMPLE_STRIDE + 1) * (range.height() as usize / SAMPLE_STRIDE + 1);
+    noise.clear();
+    noise.reserve(windows);
     // An ABW image's working units need no σ, nor do any without working units: screen first.
     let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
     let stairs = staircase(range, noise, screen);
     match stairs.step {
-        Some(q) => Prepared { image: Some(dequantise(range, q, scratch)), step: Some(q), sigma: None },
-        None => Prepared { image: None, step: None, sigma: stairs.sigma },
+        Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), sigma: None },
+        None => Prepared { dequantised: None, sigma: stairs.sigma },
     }
 }
 
 /// What [`for_config`] prepared an image as.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct Prepared {
-    /// The image dequantised, if it is a staircase and `pipeline.dequantise` is on (`None`: as it is).
-    pub image: Option<RangeImage>,
-    /// Its step, when dequantised.
-    pub step: Option<f64>,
+    /// The step and the image dequantised, if it is a staircase and `pipeline.dequantise` is on (`None`: the
+    /// image as it is).
+    pub dequantised: Option<(f64, RangeImage)>,
     /// The σ the test read when it did not dequantise (for the working units, which read the same σ; `None` if
     /// the test read none).
     pub sigma: Option<f64>,

@@ -139,20 +139,11 @@ impl Segmenter {
         let t = Instant::now();
         // A staircase (depth rounded to steps above its noise) runs dequantised, in working units of its own;
         // other images reuse the σ the test read.
-        let prepared = if config.pipeline.dequantise {
-            scratch.dequantise.reserve(range.len());
-            // Room for the σ of every sampled window, whether or not this frame's test reads them all.
-            let stride = crate::units::SAMPLE_STRIDE;
-            let windows = (range.width() as usize / stride + 1) * (range.height() as usize / stride + 1);
-            scratch.noise.clear();
-            scratch.noise.reserve(windows);
-            crate::dequantise::for_config(range, camera, config, &mut scratch.noise, &mut scratch.dequantise)
-        } else {
-            crate::dequantise::Prepared { image: None, step: None, sigma: None }
-        };
-        let (dequantised, sigma) = (prepared.image, prepared.sigma);
+        let prepared =
+            crate::dequantise::for_config(range, camera, config, &mut scratch.noise, &mut scratch.dequantise);
+        let (step, dequantised) = prepared.dequantised.unzip();
         let range = dequantised.as_ref().unwrap_or(range);
-        let units = crate::units::for_config_given(range, camera, config, sigma, &mut scratch.noise);
+        let units = crate::units::for_config_given(range, camera, config, prepared.sigma, &mut scratch.noise);
         let mut work = std::mem::take(&mut scratch.work);
         let range = if units.is_identity() {
             range
@@ -194,7 +185,7 @@ impl Segmenter {
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
         out.units = Some(units);
-        out.dequantised = prepared.step;
+        out.dequantised = step;
         scratch.work = work;
         if let Some(d) = dequantised {
             scratch.dequantise.recycle(d);

@@ -144,7 +144,7 @@ pub fn in_working_units<'a>(
 ) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
     let mut noise = Vec::new();
     let prepared = crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
-    let dequantised = prepared.image;
+    let dequantised = prepared.dequantised.map(|(_, image)| image);
     let input = dequantised.as_ref().unwrap_or(range);
     let units = for_config_given(input, camera, config, prepared.sigma, &mut noise);
     if units.is_identity() {
