@@ -264,8 +264,8 @@ fn seed(
     }
 }
 
-/// Propagates the distance maps `maps` (per pixel of `v`, `w × h`, from [`seed`]) within each terrace of a
-/// staircase of step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus
+/// Propagates the distance maps `maps` (per pixel of `v`, `w × h`, 0.5 beside their risers) within each terrace
+/// of a staircase of step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus
 /// path length. With `carried = (values, far)`, the one map carries `values` from the seed it came from, and only
 /// pixels whose `far` distance is +∞ (terraces without a riser on the far side) take part. Two forward and
 /// backward passes: exact on terraces convex enough, an upper bound on the others. The maps share the terrace
