@@ -10,6 +10,11 @@ use serde::Serialize;
 pub use eval::hoover::CURVE_TS;
 pub use eval::{HOOVER_T, TOLERANCE_PX};
 
+/// The label convention of the segmentations this module scores: the pipeline numbers its regions from 1 and
+/// leaves 0 unlabelled (`Convention::Auto` would read a segmentation of at most three regions, labels 1–3, as
+/// ABW's unlabelled levels and score every region of it missed).
+pub const SEGMENTATION: eval::Convention = eval::Convention::NonZero;
+
 /// Scores of one edge map.
 #[derive(Debug, Clone, Serialize)]
 pub struct EdgeScores {
@@ -76,7 +81,9 @@ pub fn score_image(
 ) -> ImageScores {
     let _s = tracing::info_span!("score_image").entered();
     let c1 = &out.regions.c1;
-    let correct = |labels| eval::hoover::curve(gt, labels, &CURVE_TS).iter().map(|s| s.correct).collect();
+    let correct = |labels| {
+        eval::hoover::curve_with(gt, labels, &CURVE_TS, SEGMENTATION).iter().map(|s| s.correct).collect()
+    };
     ImageScores {
         raw_canny: score_edges(raw_canny, c1, gt),
         c2: score_edges(&out.canny.edges, c1, gt),
@@ -91,17 +98,55 @@ pub fn score_image(
     }
 }
 
-/// Hoover metrics at T = 0.8 of a segmentation with its region normals.
+/// Hoover metrics at T = 0.8 of a segmentation (labels from 1, [`SEGMENTATION`]) with its region normals.
 pub fn hoover(
     gt: &LabelImage,
     labels: &LabelImage,
     regions: &[Region],
     gt_angles: &[(u32, u32, f64)],
 ) -> HooverScore {
-    eval::hoover::compare(gt, labels, HOOVER_T, Some(gt_angles), Some(&normals_of(regions)))
+    eval::hoover::compare_with(
+        gt,
+        labels,
+        HOOVER_T,
+        Some(gt_angles),
+        Some(&normals_of(regions)),
+        SEGMENTATION,
+    )
 }
 
-/// Jin et al.'s one-sided detection counts of a segmentation at their threshold (0.8).
+/// Jin et al.'s one-sided detection counts of a segmentation (labels from 1) at their threshold (0.8).
 pub fn jin(gt: &LabelImage, labels: &LabelImage) -> JinScore {
-    eval::jin::score(gt, labels, eval::Convention::Auto, eval::jin::THRESHOLD)
+    eval::jin::score(gt, labels, SEGMENTATION, eval::jin::THRESHOLD)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Grid;
+
+    /// Two GT regions (10, 11: left and right halves) and a segmentation of `n` vertical bands numbered from 1.
+    fn halves_and_bands(n: u32) -> (LabelImage, LabelImage) {
+        let gt = Grid::from_fn(40, 20, |x, _| if x < 20 { 10 } else { 11 });
+        let seg = Grid::from_fn(40, 20, |x, _| 1 + x * n / 40);
+        (gt, seg)
+    }
+
+    #[test]
+    fn segmentations_of_three_regions_or_fewer_are_scored_as_numbered_from_1() {
+        // Labels 1–3 alone once read as ABW's unlabelled levels: a perfect segmentation scored nothing.
+        let (gt, seg) = halves_and_bands(2);
+        let h = hoover(&gt, &seg, &[], &[]);
+        assert_eq!((h.correct, h.missed, h.noise), (2, 0, 0), "{h:?}");
+        assert_eq!(jin(&gt, &seg).detected, 2);
+        let curve = eval::hoover::curve_with(&gt, &seg, &CURVE_TS, SEGMENTATION);
+        assert!(curve.iter().all(|s| s.correct == 2), "{curve:?}");
+        // Four bands: each half split in two, scored the same with or without labels in 4..=9.
+        let (gt, seg) = halves_and_bands(4);
+        assert_eq!(hoover(&gt, &seg, &[], &[]).over, 2);
+        assert_eq!(
+            hoover(&gt, &seg, &[], &[]),
+            eval::hoover::compare(&gt, &seg, HOOVER_T, Some(&[]), Some(&[]))
+        );
+    }
 }

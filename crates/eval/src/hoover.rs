@@ -517,8 +517,21 @@ pub fn compare_with(
 /// # Panics
 /// If the images differ in size or some `t` is not in `(0.5, 1]`.
 pub fn curve(gt: &LabelImage, seg: &LabelImage, ts: &[f64]) -> Vec<HooverScore> {
+    curve_with(gt, seg, ts, Convention::Auto)
+}
+
+/// [`curve`] with an explicit MS label convention.
+///
+/// # Panics
+/// If the images differ in size or some `t` is not in `(0.5, 1]`.
+pub fn curve_with(
+    gt: &LabelImage,
+    seg: &LabelImage,
+    ts: &[f64],
+    seg_convention: Convention,
+) -> Vec<HooverScore> {
     let _s = tracing::info_span!("eval::hoover::curve").entered();
-    let overlap = Overlap::new(gt, seg, Convention::Auto);
+    let overlap = Overlap::new(gt, seg, seg_convention);
     ts.iter().map(|&t| overlap.score(t, None, None)).collect()
 }
 
