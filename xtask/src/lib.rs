@@ -17,7 +17,7 @@ pub const USAGE: &str = "usage: cargo xtask <command>
 commands:
   eval [--config C.toml] [--data DIR|synthetic|synthetic:FAMILY[@S] [--camera CAM] [--depth-scale M]] [--out DIR]
       Run one data set (default: the synthetic benchmark's test split, generated on first use;
-      synthetic:FAMILY the 20 test images of an artefact family (abw, stripes, staircase, kinect) at strength S
+      synthetic:FAMILY the 20 test images of an artefact family (abw, stripes, staircase, kinect, disparity) at strength S
       (default 1), generated into target/synthetic/FAMILY-sS/ on every use; a folder of
       ABW files gives its test split; any other folder every STEM.range with a STEM.gt-seg, which needs
       --camera unless the names are ABW names) and write target/eval/report.{md,html}, results.{csv,json}

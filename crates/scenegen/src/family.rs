@@ -210,11 +210,15 @@ pub enum Family {
     /// Kinect-like: σ ∝ z² (1.4 mm × strength at 1 m), disparity step 1/8 px × strength, holes on
     /// grazing surfaces and beyond 3.5 m, on a virtual 1.5–4 m depth axis; no white noise.
     Kinect,
+    /// Stereo ground truth: noise-free inverse depth (disparity), rounded to steps of strength (at least
+    /// 1). A plane is a plane in pixel coordinates and stored value, so read it with `--camera grid`.
+    Disparity,
 }
 
 impl Family {
     /// Every family, in the order reports list them.
-    pub const ALL: [Family; 4] = [Family::Abw, Family::Stripes, Family::Staircase, Family::Kinect];
+    pub const ALL: [Family; 5] =
+        [Family::Abw, Family::Stripes, Family::Staircase, Family::Kinect, Family::Disparity];
 
     /// The family's name on the command line (`synthetic:NAME`).
     #[must_use]
@@ -224,6 +228,7 @@ impl Family {
             Family::Stripes => "stripes",
             Family::Staircase => "staircase",
             Family::Kinect => "kinect",
+            Family::Disparity => "disparity",
         }
     }
 
@@ -260,6 +265,12 @@ impl Family {
                     ..base
                 }
             }
+            Family::Disparity => Params {
+                noise_sigma_v: 0.0,
+                disparity: true,
+                staircase: Some(Staircase { step_v: strength.max(1.0) }),
+                ..base
+            },
         }
     }
 }

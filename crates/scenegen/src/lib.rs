@@ -75,6 +75,9 @@ pub struct Params {
     pub staircase: Option<Staircase>,
     /// Kinect-like depth-dependent noise, disparity quantisation and holes (none in the benchmark).
     pub kinect: Option<Kinect>,
+    /// Store inverse depth, as stereo disparity, instead of range (false in the benchmark; see
+    /// [`Family::Disparity`]).
+    pub disparity: bool,
 }
 
 impl Default for Params {
@@ -99,6 +102,7 @@ impl Default for Params {
             stripes: None,
             staircase: None,
             kinect: None,
+            disparity: false,
         }
     }
 }

@@ -340,12 +340,13 @@ fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus, seed: 
     let mut range = Grid::new(w, h, 0u8);
     let stripes = params.stripes.map(|s| crate::family::stripe_field(&s, w, h, &mut side_stream(seed, 1)));
     let mut kinect_rng = side_stream(seed, 2);
+    let disparity = params.disparity.then(|| Disparity::new(&params.calibration));
     for (i, px) in range.as_mut_slice().iter_mut().enumerate() {
         let g = gauss(rng);
         // Drawn for every pixel so the stream does not depend on which pixels hold data.
         let gk = if params.kinect.is_some() { gauss(&mut kinect_rng) } else { 0.0 };
         if !v_out[i].is_nan() {
-            let mut v = v_out[i] + params.noise_sigma_v * g;
+            let mut v = disparity.as_ref().map_or(v_out[i], |d| d.value(v_out[i])) + params.noise_sigma_v * g;
             if let Some(f) = &stripes {
                 v += f[i];
             }
@@ -359,6 +360,28 @@ fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus, seed: 
         }
     }
     range
+}
+
+/// Inverse depth on the range axis: range value 0 (the nearest depth) stays 0 and 255 (the farthest) stays 255,
+/// in between the value is affine in 1/depth, so every plane is affine in pixel coordinates.
+struct Disparity {
+    offset: f64,
+    scal: f64,
+    near: f64,
+    far: f64,
+}
+
+impl Disparity {
+    fn new(cal: &rangeimage::AbwCalibration) -> Self {
+        let (near, far) = (cal.offset, 255.0 / cal.scal + cal.offset);
+        Self { offset: cal.offset, scal: cal.scal, near, far }
+    }
+
+    /// The stored value of range value `v` (depth `v / scal + offset` along the optical axis).
+    fn value(&self, v: f64) -> f64 {
+        let d = v / self.scal + self.offset;
+        255.0 * (1.0 / self.near - 1.0 / d) / (1.0 / self.near - 1.0 / self.far)
+    }
 }
 
 /// Kinect holes: no data, with a probability rising on grazing surfaces and at far range.
