@@ -144,6 +144,24 @@ pub struct Prepared {
     pub sigma: Option<f64>,
 }
 
+/// The noise σ the working units take a dequantised image to have at least, as a share of its step's rounding
+/// error `q / √12`. Noise-free steps dequantise to planes that windows fit to ~1e-6 (σ read 2e-6 to 0.02 on
+/// rendered disparity), and scaled to the working σ by that, the ramps' small misfits at terrace ends and
+/// corners became jumps (a grid frame was scaled 10⁵ times: `disparity@2` scored 2.10 of 15.10 on the grid
+/// camera). The dequantisation's own error on a plane is under 0.05 q RMS (0.17 of the rounding error); the share
+/// was swept from 0.05 to 0.3 (docs/results.md, "Dequantised depth keeps a noise floor").
+pub const SIGMA_FLOOR_SHARE: f64 = 0.1;
+
+impl Prepared {
+    /// The least noise σ the working units may take the image to have, in its own units: [`SIGMA_FLOOR_SHARE`]
+    /// of the rounding error if it was dequantised, else 0 (the working units find the floor of a staircase
+    /// they read themselves).
+    #[must_use]
+    pub fn sigma_floor(&self) -> f64 {
+        self.dequantised.as_ref().map_or(0.0, |(q, _)| SIGMA_FLOOR_SHARE * q / 12f64.sqrt())
+    }
+}
+
 /// `range`, depth rounded to steps of `q`, dequantised (module docs); NaN stays NaN. The image lives in the
 /// memory of `scratch` (give it back with [`Scratch::recycle`]).
 ///

@@ -141,9 +141,11 @@ impl Segmenter {
         // other images reuse the σ the test read.
         let prepared =
             crate::dequantise::for_config(range, camera, config, &mut scratch.noise, &mut scratch.dequantise);
+        let floor = prepared.sigma_floor();
         let (step, dequantised) = prepared.dequantised.unzip();
         let range = dequantised.as_ref().unwrap_or(range);
-        let units = crate::units::for_config_given(range, camera, config, prepared.sigma, &mut scratch.noise);
+        let units =
+            crate::units::for_config_given(range, camera, config, prepared.sigma, floor, &mut scratch.noise);
         let mut work = std::mem::take(&mut scratch.work);
         let range = if units.is_identity() {
             range

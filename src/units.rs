@@ -17,6 +17,8 @@
 //! ([`planefit::noise::step_from_smallest`]; the step test runs only when σ
 //! is below that): noise-free quantised depth (rendered, or a sensor that smooths before it rounds) reads
 //! σ ≈ 0 where most windows lie within one step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
+//! A staircase the pipeline dequantised ([`crate::dequantise`]) has no step left to read: its σ is floored at a
+//! share of its step's rounding error instead ([`crate::dequantise::SIGMA_FLOOR_SHARE`]).
 
 use rangeimage::{Camera, RangeImage};
 
@@ -69,15 +71,17 @@ pub fn working_units(range: &RangeImage, camera: &Camera) -> WorkingUnits {
 
 /// [`working_units`] with the noise estimate's scratch memory in `scratch` (for a stream of frames).
 pub fn working_units_with(range: &RangeImage, camera: &Camera, scratch: &mut Vec<f64>) -> WorkingUnits {
-    working_units_given(range, camera, None, scratch)
+    working_units_given(range, camera, None, 0.0, scratch)
 }
 
 /// [`working_units_with`], given `sigma`, the σ of `range` (`planefit::noise::sigma_sampled` at this module's
-/// stride, in the image's own units) if the caller read it already.
+/// stride, in the image's own units) if the caller read it already, and `floor`, a σ the image has at least in
+/// its own units (0: none; a dequantised staircase's, `dequantise::Prepared::sigma_floor`).
 pub fn working_units_given(
     range: &RangeImage,
     camera: &Camera,
     sigma: Option<f64>,
+    floor: f64,
     scratch: &mut Vec<f64>,
 ) -> WorkingUnits {
     let (depth_scale, (lo, hi)) = match *camera {
@@ -97,7 +101,7 @@ pub fn working_units_given(
         }
         _ => 0.0,
     };
-    let sigma = if sigma.is_nan() { sigma } else { sigma.max(rounding) };
+    let sigma = if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale) };
     let k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
     let camera = match *camera {
         Camera::Pinhole { fx, fy, cx, cy, .. } => Camera::Pinhole { fx, fy, cx, cy, depth_scale: 1.0 },
@@ -115,19 +119,21 @@ pub fn for_config(
     config: &crate::Config,
     scratch: &mut Vec<f64>,
 ) -> WorkingUnits {
-    for_config_given(range, camera, config, None, scratch)
+    for_config_given(range, camera, config, None, 0.0, scratch)
 }
 
-/// [`for_config`], given the σ of `range` if the caller read it already (see [`working_units_given`]).
+/// [`for_config`], given the σ of `range` if the caller read it already and a floor under it (see
+/// [`working_units_given`]).
 pub fn for_config_given(
     range: &RangeImage,
     camera: &Camera,
     config: &crate::Config,
     sigma: Option<f64>,
+    floor: f64,
     scratch: &mut Vec<f64>,
 ) -> WorkingUnits {
     if config.pipeline.normalize_units {
-        working_units_given(range, camera, sigma, scratch)
+        working_units_given(range, camera, sigma, floor, scratch)
     } else {
         WorkingUnits::identity(camera)
     }
@@ -144,9 +150,10 @@ pub fn in_working_units<'a>(
 ) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
     let mut noise = Vec::new();
     let prepared = crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
+    let floor = prepared.sigma_floor();
     let dequantised = prepared.dequantised.map(|(_, image)| image);
     let input = dequantised.as_ref().unwrap_or(range);
-    let units = for_config_given(input, camera, config, prepared.sigma, &mut noise);
+    let units = for_config_given(input, camera, config, prepared.sigma, floor, &mut noise);
     if units.is_identity() {
         let out = dequantised.map_or(std::borrow::Cow::Borrowed(range), std::borrow::Cow::Owned);
         return (out, units.camera);
