@@ -38,6 +38,8 @@ pub struct Scratch {
     /// Per pixel of a terrace with one riser: its distance to that riser, and the width of the terrace beyond.
     ramp: Vec<f32>,
     ramp_width: Vec<f32>,
+    /// Per pixel: which of its 8 neighbours lie in its terrace ([`terrace_neighbours`]).
+    same: Vec<u8>,
     /// The memory of the last dequantised image, given back by [`Scratch::recycle`].
     values: Vec<f32>,
 }
@@ -50,6 +52,8 @@ impl Scratch {
             v.clear();
             v.reserve(px);
         }
+        self.same.clear();
+        self.same.reserve(px);
     }
 
     /// Takes back the memory of an image [`dequantise`] returned.
@@ -172,13 +176,18 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     assert!(q > 0.0 && q.is_finite(), "the step must be positive, got {q}");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let v = range.as_slice();
-    let Scratch { down, up, ramp, ramp_width, values } = scratch;
+    let Scratch { down, up, ramp, ramp_width, same, values } = scratch;
+    terrace_neighbours(v, (w, h), q, same);
     // Distances to the risers down and up within each terrace.
     // Seeds: the pixels beside a riser down, and beside a riser up.
     unreached([&mut *down, &mut *up], w * h);
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
+            // Left, up, right and down all in the pixel's terrace: no riser beside it.
+            if same[i] & 0b0101_0101 == 0b0101_0101 {
+                continue;
+            }
             for (ok, j) in four_neighbours((x, y), (w, h)) {
                 match relation(v[i], if ok { v[j] } else { f32::NAN }, q) {
                     Some(-1.0) => down[i] = 0.5,
@@ -188,7 +197,7 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
             }
         }
     }
-    chamfer(v, (w, h), q, [down.as_mut_slice(), up.as_mut_slice()], None);
+    chamfer_pair(v, (w, h), same, down, up);
     let mut out = std::mem::take(values);
     out.clear();
     out.extend(v.iter().zip(down.iter().zip(up.iter())).map(|(&s, (&dd, &du))| {
@@ -210,7 +219,7 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
         // Only pixels beside the near riser, in terraces without a far one, can be seeds.
         seed(v, (w, h), |i| near[i] != 0.5 || far[i].is_finite(), across, ramp, ramp_width);
         // Only terraces without a riser on the far side take part (no other pixel has a seed in its terrace).
-        chamfer(v, (w, h), q, [ramp.as_mut_slice()], Some((ramp_width.as_mut_slice(), far)));
+        chamfer_carrying(v, (w, h), same, ramp, ramp_width, far);
         for (i, o) in out.iter_mut().enumerate() {
             if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
                 let rise = (f64::from(ramp[i]) / f64::from(ramp_width[i])).min(1.0);
@@ -282,96 +291,148 @@ fn seed(
     }
 }
 
-/// Propagates the distance maps `maps` (per pixel of `v`, `w × h`, 0.5 beside their risers) within each terrace
-/// of a staircase of step `q` (8-neighbour chamfer, 1 and √2): each pixel ends with the smallest seed distance plus
-/// path length. With `carried = (values, far)`, the one map carries `values` from the seed it came from, and only
-/// pixels whose `far` distance is +∞ (terraces without a riser on the far side) take part. Two forward and
-/// backward passes: exact on terraces convex enough, an upper bound on the others. The maps share the terrace
-/// tests; each relaxes as it would alone.
-fn chamfer<const N: usize>(
+/// Sets `same[i]` to the neighbours of pixel `i` (of `v`, `w × h`) that lie inside the image and in its terrace of a
+/// staircase of step `q` (values less than half a step apart; no data is in no terrace): bit 0 left, 1 up-left, 2
+/// up, 3 up-right, 4 right, 5 down-right, 6 down, 7 down-left.
+fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<u8>) {
+    let half = 0.5 * q;
+    same.clear();
+    same.resize(w * h, 0);
+    // The relation is symmetric: each pair is tested once, from its first pixel in raster order, and marks both.
+    // Offsets to the right, down-right, down and down-left neighbours; the first pixel's bit, then the second's.
+    let pairs = [(1, 4, 0), (w + 1, 5, 1), (w, 6, 2), (w - 1, 7, 3)];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let vi = f64::from(v[i]);
+            let inside = [x + 1 < w, y + 1 < h && x + 1 < w, y + 1 < h, y + 1 < h && x > 0];
+            for (&(k, mine, theirs), inside) in pairs.iter().zip(inside) {
+                if inside && (f64::from(v[i + k]) - vi).abs() < half {
+                    same[i] |= 1 << mine;
+                    same[i + k] |= 1 << theirs;
+                }
+            }
+        }
+    }
+}
+
+/// Propagates the distance maps `down` and `up` (per pixel of `v`, `w × h`, 0.5 beside their risers) within each
+/// terrace (`same`, from [`terrace_neighbours`]; 8-neighbour chamfer, 1 and √2): each pixel ends with the smallest
+/// seed distance plus path length. Two forward and backward passes: exact on terraces convex enough, an upper bound
+/// on the others.
+fn chamfer_pair(v: &[f32], (w, h): (usize, usize), same: &[u8], down: &mut [f32], up: &mut [f32]) {
+    for _ in 0..2 {
+        chamfer_pair_pass::<true>(v, (w, h), same, down, up);
+        chamfer_pair_pass::<false>(v, (w, h), same, down, up);
+    }
+}
+
+/// One pass of [`chamfer_pair`]: forward (rows top down, left to right, from the left and the row above: bits 0–3 of
+/// [`terrace_neighbours`]), or backward, the same on the image turned half a turn (bits 4–7).
+fn chamfer_pair_pass<const FORWARD: bool>(
     v: &[f32],
     (w, h): (usize, usize),
-    q: f64,
-    mut maps: [&mut [f32]; N],
-    carried: Option<(&mut [f32], &[f32])>,
+    same: &[u8],
+    down: &mut [f32],
+    up: &mut [f32],
 ) {
     let diag = std::f32::consts::SQRT_2;
-    let half = 0.5 * q;
-    let (mut values, far) = match carried {
-        Some((values, far)) => (Some(values), Some(far)),
-        None => (None, None),
+    // Distances are never NaN: the shortest of the paths, whatever their order.
+    let relax = |best: &mut f32, through: f32| {
+        if through < *best {
+            *best = through;
+        }
     };
+    for n in 0..h {
+        let y = if FORWARD { n } else { h - 1 - n };
+        let ((row_d, prev_d), (row_u, prev_u)) =
+            (split_rows::<FORWARD>(down, y, w), split_rows::<FORWARD>(up, y, w));
+        for m in 0..w {
+            let x = if FORWARD { m } else { w - 1 - m };
+            let bits = if FORWARD { same[y * w + x] & 0xF } else { same[y * w + x] >> 4 };
+            if bits == 0 || !v[y * w + x].is_finite() {
+                continue;
+            }
+            // The neighbour the pass has left behind in the row, and the one ahead of it in the previous row (the
+            // bits say which exist).
+            let (behind, ahead) =
+                if FORWARD { (x.wrapping_sub(1), x + 1) } else { (x + 1, x.wrapping_sub(1)) };
+            let (mut d, mut u) = (row_d[x], row_u[x]);
+            if bits & 1 != 0 {
+                relax(&mut d, row_d[behind] + 1.0);
+                relax(&mut u, row_u[behind] + 1.0);
+            }
+            if bits & 2 != 0 {
+                relax(&mut d, prev_d[behind] + diag);
+                relax(&mut u, prev_u[behind] + diag);
+            }
+            if bits & 4 != 0 {
+                relax(&mut d, prev_d[x] + 1.0);
+                relax(&mut u, prev_u[x] + 1.0);
+            }
+            if bits & 8 != 0 {
+                relax(&mut d, prev_d[ahead] + diag);
+                relax(&mut u, prev_u[ahead] + diag);
+            }
+            (row_d[x], row_u[x]) = (d, u);
+        }
+    }
+}
+
+/// Row `y` of `map` (rows of `w`), writable, and the row a pass came from: the one above going forward, the one below
+/// going backward (empty where there is none).
+fn split_rows<const FORWARD: bool>(map: &mut [f32], y: usize, w: usize) -> (&mut [f32], &[f32]) {
+    if FORWARD {
+        let (above, rest) = map.split_at_mut(y * w);
+        (&mut rest[..w], &above[above.len().saturating_sub(w)..])
+    } else {
+        let (upto, below) = map.split_at_mut((y + 1) * w);
+        (&mut upto[y * w..], &below[..below.len().min(w)])
+    }
+}
+
+/// The step lengths to the neighbours [`chamfer_carrying`] relaxes a pixel from, forward (left, up-left, up,
+/// up-right: bits 0–3 of [`terrace_neighbours`]) and backward (the same turned half a turn: right, down-right, down,
+/// down-left, bits 4–7).
+const STEPS: [f32; 4] = [1.0, std::f32::consts::SQRT_2, 1.0, std::f32::consts::SQRT_2];
+
+/// [`chamfer_pair`] for one distance map `map` that carries `values` from the seed it came from (the first neighbour,
+/// in the order of [`STEPS`], that offers a shorter path), where only pixels whose `far` distance is +∞ (terraces
+/// without a riser on the far side) take part.
+fn chamfer_carrying(
+    v: &[f32],
+    (w, h): (usize, usize),
+    same: &[u8],
+    map: &mut [f32],
+    values: &mut [f32],
+    far: &[f32],
+) {
+    let offsets = [1, w + 1, w, w - 1];
     for _ in 0..2 {
-        // Forward (from the left and the row above, in that order), then backward (from the right and the row
-        // below): the backward pass is the forward one on the image turned half a turn.
         for forward in [true, false] {
-            for ym in 0..h {
-                for xm in 0..w {
-                    let (x, y) = if forward { (xm, ym) } else { (w - 1 - xm, h - 1 - ym) };
-                    let i = y * w + x;
-                    if !takes_part(v, far, i) {
-                        continue;
-                    }
-                    let at = |k: usize| if forward { i - k } else { i + k };
-                    let mut from = [(0, 0.0); 4];
-                    let mut n = 0;
-                    for (inside, k, c) in [
-                        (xm > 0, 1, 1.0),
-                        (ym > 0 && xm > 0, w + 1, diag),
-                        (ym > 0, w, 1.0),
-                        (ym > 0 && xm + 1 < w, w - 1, diag),
-                    ] {
-                        if inside {
-                            from[n] = (at(k), c);
-                            n += 1;
+            let shift = if forward { 0 } else { 4 };
+            for n in 0..w * h {
+                let i = if forward { n } else { w * h - 1 - n };
+                let bits = (same[i] >> shift) & 0xF;
+                if bits == 0 || !v[i].is_finite() || far[i].is_finite() {
+                    continue;
+                }
+                let (mut best, mut src) = (map[i], usize::MAX);
+                for (b, &c) in STEPS.iter().enumerate() {
+                    if bits & (1 << b) != 0 {
+                        let j = if forward { i - offsets[b] } else { i + offsets[b] };
+                        let through = map[j] + c;
+                        if through < best {
+                            (best, src) = (through, j);
                         }
                     }
-                    relax(v, half, i, &from[..n], &mut maps, values.as_deref_mut());
+                }
+                if src != usize::MAX {
+                    map[i] = best;
+                    values[i] = values[src];
                 }
             }
         }
-    }
-}
-
-/// Whether pixel `i` takes part in [`chamfer`]: it holds data and, with `far`, its terrace has no far riser.
-#[inline(always)]
-fn takes_part(v: &[f32], far: Option<&[f32]>, i: usize) -> bool {
-    v[i].is_finite() && far.is_none_or(|f| f[i].is_infinite())
-}
-
-/// One pixel `i` of [`chamfer`]: per map, the first neighbour of `from` (index, step length) in its terrace that
-/// offers a shorter path; `values`, if any, follows the (one) map.
-#[inline(always)]
-fn relax<const N: usize>(
-    v: &[f32],
-    half: f64,
-    i: usize,
-    from: &[(usize, f32)],
-    maps: &mut [&mut [f32]; N],
-    values: Option<&mut [f32]>,
-) {
-    let vi = f64::from(v[i]);
-    let mut best: [f32; N] = std::array::from_fn(|k| maps[k][i]);
-    let mut src = [usize::MAX; N];
-    for &(j, c) in from {
-        if (f64::from(v[j]) - vi).abs() < half {
-            for k in 0..N {
-                let through = maps[k][j] + c;
-                if through < best[k] {
-                    (best[k], src[k]) = (through, j);
-                }
-            }
-        }
-    }
-    for k in 0..N {
-        if src[k] != usize::MAX {
-            maps[k][i] = best[k];
-        }
-    }
-    if let Some(values) = values
-        && src[0] != usize::MAX
-    {
-        values[i] = values[src[0]];
     }
 }
 
@@ -488,6 +549,43 @@ mod tests {
             // Continuous depth has no step.
             let smooth = Grid::from_fn(160, 120, |x, y| plane(f64::from(x), f64::from(y)) as f32);
             assert_eq!(test(&smooth).step, None, "screen {screen}");
+        }
+    }
+
+    #[test]
+    fn tiny_and_ragged_images_keep_every_value_within_half_a_step() {
+        // Single rows and columns, no data, jumps: the passes' row slices and neighbour bits at every border.
+        for (w, h) in [(1, 1), (1, 6), (6, 1), (2, 3), (7, 4), (33, 9)] {
+            let img: RangeImage = Grid::from_fn(w, h, |x, y| {
+                if (x * 5 + y * 3) % 11 == 4 {
+                    f32::NAN
+                } else {
+                    (f64::from(x) * 0.4 + f64::from(y) * 0.3 + 3.0 * f64::from(u8::from((x + y) % 9 == 0)))
+                        .round() as f32
+                }
+            });
+            let v = img.as_slice();
+            let (wu, hu) = (w as usize, h as usize);
+            let mut same = Vec::new();
+            terrace_neighbours(v, (wu, hu), 1.0, &mut same);
+            for (x, y, _) in img.enumerate() {
+                let (x, y) = (x as isize, y as isize);
+                let i = (y * w as isize + x) as usize;
+                for (bit, (dx, dy)) in [(-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    let (nx, ny) = (x + dx, y + dy);
+                    let inside = nx >= 0 && ny >= 0 && nx < w as isize && ny < h as isize;
+                    let expected = inside
+                        && (f64::from(v[(ny * w as isize + nx) as usize]) - f64::from(v[i])).abs() < 0.5;
+                    assert_eq!(same[i] & (1 << bit) != 0, expected, "{w}×{h} ({x}, {y}) bit {bit}");
+                }
+            }
+            let out = dequantised(&img, 1.0);
+            for (s, o) in v.iter().zip(out.as_slice()) {
+                assert!(s.is_nan() && o.is_nan() || (o - s).abs() <= 0.5 + 1e-4, "{w}×{h}: {s} became {o}");
+            }
         }
     }
 }
