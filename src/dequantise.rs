@@ -300,7 +300,7 @@ fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<
     same.resize(w * h, 0);
     // The relation is symmetric: each pair is tested once, from its first pixel in raster order, and marks both.
     // Offsets to the right, down-right, down and down-left neighbours; the first pixel's bit, then the second's.
-    let pairs = [(1, 4, 0), (w + 1, 5, 1), (w, 6, 2), (w - 1, 7, 3)];
+    let pairs = [(1, 4, 0), (w + 1, 5, 1), (w, 6, 2), (w.saturating_sub(1), 7, 3)];
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
@@ -407,7 +407,7 @@ fn chamfer_carrying(
     values: &mut [f32],
     far: &[f32],
 ) {
-    let offsets = [1, w + 1, w, w - 1];
+    let offsets = [1, w + 1, w, w.saturating_sub(1)];
     for _ in 0..2 {
         for forward in [true, false] {
             let shift = if forward { 0 } else { 4 };
@@ -555,7 +555,7 @@ mod tests {
     #[test]
     fn tiny_and_ragged_images_keep_every_value_within_half_a_step() {
         // Single rows and columns, no data, jumps: the passes' row slices and neighbour bits at every border.
-        for (w, h) in [(1, 1), (1, 6), (6, 1), (2, 3), (7, 4), (33, 9)] {
+        for (w, h) in [(0, 0), (0, 3), (1, 1), (1, 6), (6, 1), (2, 3), (7, 4), (33, 9)] {
             let img: RangeImage = Grid::from_fn(w, h, |x, y| {
                 if (x * 5 + y * 3) % 11 == 4 {
                     f32::NAN
