@@ -358,21 +358,18 @@ fn chamfer_pair_pass<const FORWARD: bool>(
             let (behind, ahead) =
                 if FORWARD { (x.wrapping_sub(1), x + 1) } else { (x + 1, x.wrapping_sub(1)) };
             let (mut d, mut u) = (row_d[x], row_u[x]);
-            if bits & 1 != 0 {
-                relax(&mut d, row_d[behind] + 1.0);
-                relax(&mut u, row_u[behind] + 1.0);
-            }
-            if bits & 2 != 0 {
-                relax(&mut d, prev_d[behind] + diag);
-                relax(&mut u, prev_u[behind] + diag);
-            }
-            if bits & 4 != 0 {
-                relax(&mut d, prev_d[x] + 1.0);
-                relax(&mut u, prev_u[x] + 1.0);
-            }
-            if bits & 8 != 0 {
-                relax(&mut d, prev_d[ahead] + diag);
-                relax(&mut u, prev_u[ahead] + diag);
+            // Bits 0–3: behind in the row, then behind, level and ahead in the previous row.
+            for (bit, (in_row, at, step)) in
+                [(true, behind, 1.0), (false, behind, diag), (false, x, 1.0), (false, ahead, diag)]
+                    .into_iter()
+                    .enumerate()
+            {
+                if bits & (1 << bit) != 0 {
+                    let (from_d, from_u) =
+                        if in_row { (row_d[at], row_u[at]) } else { (prev_d[at], prev_u[at]) };
+                    relax(&mut d, from_d + step);
+                    relax(&mut u, from_u + step);
+                }
             }
             (row_d[x], row_u[x]) = (d, u);
         }
