@@ -365,7 +365,7 @@ fn quantise(params: &Params, v_out: &[f64], rng: &mut Xoshiro256PlusPlus, seed: 
 /// Inverse depth on the range axis: range value 0 (the nearest depth) stays 0 and 255 (the farthest) stays 255,
 /// in between the value is affine in 1/depth, so every plane is affine in pixel coordinates.
 struct Disparity {
-    offset: f64,
+    /// The calibration's range scale, and the depths of range values 0 (its offset) and 255.
     scal: f64,
     near: f64,
     far: f64,
@@ -373,13 +373,12 @@ struct Disparity {
 
 impl Disparity {
     fn new(cal: &rangeimage::AbwCalibration) -> Self {
-        let (near, far) = (cal.offset, 255.0 / cal.scal + cal.offset);
-        Self { offset: cal.offset, scal: cal.scal, near, far }
+        Self { scal: cal.scal, near: cal.offset, far: 255.0 / cal.scal + cal.offset }
     }
 
     /// The stored value of range value `v` (depth `v / scal + offset` along the optical axis).
     fn value(&self, v: f64) -> f64 {
-        let d = v / self.scal + self.offset;
+        let d = v / self.scal + self.near;
         255.0 * (1.0 / self.near - 1.0 / d) / (1.0 / self.near - 1.0 / self.far)
     }
 }
