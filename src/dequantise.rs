@@ -197,7 +197,7 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
             }
         }
     }
-    chamfer_pair(v, (w, h), same, down, up);
+    chamfer_pair((w, h), same, down, up);
     let mut out = std::mem::take(values);
     out.clear();
     out.extend(v.iter().zip(down.iter().zip(up.iter())).map(|(&s, (&dd, &du))| {
@@ -219,7 +219,7 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
         // Only pixels beside the near riser, in terraces without a far one, can be seeds.
         seed(v, (w, h), |i| near[i] != 0.5 || far[i].is_finite(), across, ramp, ramp_width);
         // Only terraces without a riser on the far side take part (no other pixel has a seed in its terrace).
-        chamfer_carrying(v, (w, h), same, ramp, ramp_width, far);
+        chamfer_carrying((w, h), same, ramp, ramp_width, far);
         for (i, o) in out.iter_mut().enumerate() {
             if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
                 let rise = (f64::from(ramp[i]) / f64::from(ramp_width[i])).min(1.0);
@@ -295,7 +295,6 @@ fn seed(
 /// staircase of step `q` (values less than half a step apart; no data is in no terrace): bit 0 left, 1 up-left, 2
 /// up, 3 up-right, 4 right, 5 down-right, 6 down, 7 down-left.
 fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<u8>) {
-    let half = 0.5 * q;
     same.clear();
     same.resize(w * h, 0);
     // The relation is symmetric: each pair is tested once, from its first pixel in raster order, and marks both.
@@ -304,10 +303,9 @@ fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
-            let vi = f64::from(v[i]);
             let inside = [x + 1 < w, y + 1 < h && x + 1 < w, y + 1 < h, y + 1 < h && x > 0];
             for (&(k, mine, theirs), inside) in pairs.iter().zip(inside) {
-                if inside && (f64::from(v[i + k]) - vi).abs() < half {
+                if inside && relation(v[i], v[i + k], q) == Some(0.0) {
                     same[i] |= 1 << mine;
                     same[i + k] |= 1 << theirs;
                 }
@@ -316,27 +314,25 @@ fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<
     }
 }
 
-/// Propagates the distance maps `down` and `up` (per pixel of `v`, `w × h`, 0.5 beside their risers) within each
+/// Propagates the distance maps `down` and `up` (per pixel, `w × h`, 0.5 beside their risers) within each
 /// terrace (`same`, from [`terrace_neighbours`]; 8-neighbour chamfer, 1 and √2): each pixel ends with the smallest
 /// seed distance plus path length. Two forward and backward passes: exact on terraces convex enough, an upper bound
 /// on the others.
-fn chamfer_pair(v: &[f32], (w, h): (usize, usize), same: &[u8], down: &mut [f32], up: &mut [f32]) {
+fn chamfer_pair((w, h): (usize, usize), same: &[u8], down: &mut [f32], up: &mut [f32]) {
     for _ in 0..2 {
-        chamfer_pair_pass::<true>(v, (w, h), same, down, up);
-        chamfer_pair_pass::<false>(v, (w, h), same, down, up);
+        chamfer_pair_pass::<true>((w, h), same, down, up);
+        chamfer_pair_pass::<false>((w, h), same, down, up);
     }
 }
 
 /// One pass of [`chamfer_pair`]: forward (rows top down, left to right, from the left and the row above: bits 0–3 of
 /// [`terrace_neighbours`]), or backward, the same on the image turned half a turn (bits 4–7).
 fn chamfer_pair_pass<const FORWARD: bool>(
-    v: &[f32],
     (w, h): (usize, usize),
     same: &[u8],
     down: &mut [f32],
     up: &mut [f32],
 ) {
-    let diag = std::f32::consts::SQRT_2;
     // Distances are never NaN: the shortest of the paths, whatever their order.
     let relax = |best: &mut f32, through: f32| {
         if through < *best {
@@ -349,8 +345,9 @@ fn chamfer_pair_pass<const FORWARD: bool>(
             (split_rows::<FORWARD>(down, y, w), split_rows::<FORWARD>(up, y, w));
         for m in 0..w {
             let x = if FORWARD { m } else { w - 1 - m };
+            // No data is in no terrace: its bits are 0.
             let bits = if FORWARD { same[y * w + x] & 0xF } else { same[y * w + x] >> 4 };
-            if bits == 0 || !v[y * w + x].is_finite() {
+            if bits == 0 {
                 continue;
             }
             // The neighbour the pass has left behind in the row, and the one ahead of it in the previous row (the
@@ -359,10 +356,10 @@ fn chamfer_pair_pass<const FORWARD: bool>(
                 if FORWARD { (x.wrapping_sub(1), x + 1) } else { (x + 1, x.wrapping_sub(1)) };
             let (mut d, mut u) = (row_d[x], row_u[x]);
             // Bits 0–3: behind in the row, then behind, level and ahead in the previous row.
-            for (bit, (in_row, at, step)) in
-                [(true, behind, 1.0), (false, behind, diag), (false, x, 1.0), (false, ahead, diag)]
-                    .into_iter()
-                    .enumerate()
+            for (bit, ((in_row, at), step)) in [(true, behind), (false, behind), (false, x), (false, ahead)]
+                .into_iter()
+                .zip(STEPS)
+                .enumerate()
             {
                 if bits & (1 << bit) != 0 {
                     let (from_d, from_u) =
@@ -388,7 +385,7 @@ fn split_rows<const FORWARD: bool>(map: &mut [f32], y: usize, w: usize) -> (&mut
     }
 }
 
-/// The step lengths to the neighbours [`chamfer_carrying`] relaxes a pixel from, forward (left, up-left, up,
+/// The step lengths to the neighbours a chamfer pass relaxes a pixel from, forward (left, up-left, up,
 /// up-right: bits 0–3 of [`terrace_neighbours`]) and backward (the same turned half a turn: right, down-right, down,
 /// down-left, bits 4–7).
 const STEPS: [f32; 4] = [1.0, std::f32::consts::SQRT_2, 1.0, std::f32::consts::SQRT_2];
@@ -396,14 +393,7 @@ const STEPS: [f32; 4] = [1.0, std::f32::consts::SQRT_2, 1.0, std::f32::consts::S
 /// [`chamfer_pair`] for one distance map `map` that carries `values` from the seed it came from (the first neighbour,
 /// in the order of [`STEPS`], that offers a shorter path), where only pixels whose `far` distance is +∞ (terraces
 /// without a riser on the far side) take part.
-fn chamfer_carrying(
-    v: &[f32],
-    (w, h): (usize, usize),
-    same: &[u8],
-    map: &mut [f32],
-    values: &mut [f32],
-    far: &[f32],
-) {
+fn chamfer_carrying((w, h): (usize, usize), same: &[u8], map: &mut [f32], values: &mut [f32], far: &[f32]) {
     let offsets = [1, w + 1, w, w.saturating_sub(1)];
     for _ in 0..2 {
         for forward in [true, false] {
@@ -411,7 +401,7 @@ fn chamfer_carrying(
             for n in 0..w * h {
                 let i = if forward { n } else { w * h - 1 - n };
                 let bits = (same[i] >> shift) & 0xF;
-                if bits == 0 || !v[i].is_finite() || far[i].is_finite() {
+                if bits == 0 || far[i].is_finite() {
                     continue;
                 }
                 let (mut best, mut src) = (map[i], usize::MAX);
