@@ -19,6 +19,8 @@
 //! σ ≈ 0 where most windows lie within one step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
 //! A staircase the pipeline dequantised ([`crate::dequantise`]) has no step left to read: its σ is floored at a
 //! share of its step's rounding error instead ([`crate::dequantise::SIGMA_FLOOR_SHARE`]).
+//! Depth with neither noise nor a step (a renderer's floats) reads σ = 0 or float rounding: a pinhole image's σ is at
+//! least [`PINHOLE_PITCH_SHARE`] of its pixel pitch.
 
 use rangeimage::{Camera, RangeImage};
 
@@ -27,6 +29,11 @@ use rangeimage::{Camera, RangeImage};
 pub const PINHOLE_SIGMA: f64 = 0.25;
 /// Grid images whose σ lies within this range run in their own units; others are scaled to its nearest end.
 pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
+/// A pinhole image's σ is at least this share of its pixel pitch (the 3D distance between horizontally neighbouring
+/// pixels at the image centre and the image's mean depth): rendered depth without noise or rounding reads σ = 0 (or
+/// ~1e-6 m where the windows are not head-on), and would run in its own units, metres, where a room merges into one.
+/// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
+pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
 /// Stride of the 5 × 5 windows σ is read from (1/16 of them).
 pub(crate) const SAMPLE_STRIDE: usize = 4;
 
@@ -63,7 +70,7 @@ impl WorkingUnits {
 ///
 /// A pinhole camera's `depth_scale` is folded into the factor, so the features (computed on depth values)
 /// and the 3D points (depth values times `depth_scale`) share one unit. Without a noise estimate (fewer
-/// than 20 full windows, or noise-free depth) the image runs in its 3D units.
+/// than 20 full windows) the image runs in its 3D units.
 #[must_use]
 pub fn working_units(range: &RangeImage, camera: &Camera) -> WorkingUnits {
     working_units_with(range, camera, &mut Vec::new())
@@ -101,13 +108,21 @@ pub fn working_units_given(
         }
         _ => 0.0,
     };
-    let sigma = if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale) };
+    // Noise-free depth without a step has neither: the pixel pitch gives a pinhole image its floor (a grid image's
+    // scale is also its slopes' unit, so it has none).
+    let pitch_floor = match *camera {
+        Camera::Pinhole { .. } => planefit::noise::step_geometry(range, camera, 0.0)
+            .map_or(0.0, |(_, pitch)| PINHOLE_PITCH_SHARE * pitch),
+        _ => 0.0,
+    };
+    let sigma =
+        if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale).max(pitch_floor) };
     let k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
     let camera = match *camera {
         Camera::Pinhole { fx, fy, cx, cy, .. } => Camera::Pinhole { fx, fy, cx, cy, depth_scale: 1.0 },
         other => other,
     };
-    tracing::debug!(sigma, rounding, factor = k * depth_scale, "working units");
+    tracing::debug!(sigma, rounding, pitch_floor, factor = k * depth_scale, "working units");
     WorkingUnits { factor: k * depth_scale, camera }
 }
 
@@ -231,9 +246,11 @@ mod tests {
         let s = planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE);
         assert!((u.factor - PINHOLE_SIGMA / s).abs() < 1e-12, "{u:?}");
         assert_eq!(u.camera, PIN);
-        // No noise estimate (noise-free depth, or too few windows): the 3D units.
+        // Noise-free depth (σ = 0): σ is a share of the pixel pitch, 0.5 m / 500 px at the depth of 2 × 0.25 m.
         let flat = Grid::new(64, 48, 2.0f32);
-        assert_eq!(working_units(&flat, &cam).factor, 0.25);
+        let expected = 0.25 * PINHOLE_SIGMA / (PINHOLE_PITCH_SHARE * 0.5 / 500.0);
+        assert!((working_units(&flat, &cam).factor / expected - 1.0).abs() < 1e-9);
+        // No noise estimate (too few windows): the 3D units.
         assert!(working_units(&Grid::new(3, 3, 2.0f32), &PIN).is_identity());
     }
 

@@ -164,27 +164,42 @@ fn the_result_does_not_depend_on_the_depth_unit() {
 /// A noise-free rendered room as a depth sensor without noise would store it: floor, back wall, two side walls
 /// and a slanted panel, seen by a 640 × 480 pinhole camera, depth in metres rounded to whole millimetres.
 fn noise_free_room() -> (rangeimage::RangeImage, rangeimage::Camera) {
+    render_room(
+        &[
+            ([0.0, -1.0, 0.0], -1.2, None),
+            ([0.0, 0.0, 1.0], 4.0, None),
+            ([1.0, 0.0, 0.0], 1.8, None),
+            ([-1.0, 0.0, 0.0], 1.6, None),
+            ([0.3, 0.0, 1.0], 2.6, Some([200.0, 100.0, 420.0, 300.0])),
+        ],
+        true,
+    )
+}
+
+/// A plane `n · p = d` (y down) of [`render_room`], limited to a pixel box `[x0, y0, x1, y1]` if it has one.
+type RoomPlane = ([f64; 3], f64, Option<[f64; 4]>);
+
+/// Planes `n · p = d` (y down), each limited to a pixel box if it has one, seen by a 640 × 480 pinhole camera
+/// without noise: depth in metres, rounded to whole millimetres if `rounded` (else as a renderer writes it, in
+/// floats).
+fn render_room(planes: &[RoomPlane], rounded: bool) -> (rangeimage::RangeImage, rangeimage::Camera) {
     let (fx, cx, cy) = (525.0, 319.5, 239.5);
-    // Planes n · p = d (y down), and the pixel box a plane is limited to.
-    let planes: [([f64; 3], f64, Option<[f64; 4]>); 5] = [
-        ([0.0, -1.0, 0.0], -1.2, None),
-        ([0.0, 0.0, 1.0], 4.0, None),
-        ([1.0, 0.0, 0.0], 1.8, None),
-        ([-1.0, 0.0, 0.0], 1.6, None),
-        ([0.3, 0.0, 1.0], 2.6, Some([200.0, 100.0, 420.0, 300.0])),
-    ];
     let range = rangeimage::Grid::from_fn(640, 480, |u, v| {
         let (u, v) = (f64::from(u), f64::from(v));
         let ray = [(u - cx) / fx, (v - cy) / fx, 1.0];
         let mut z = f64::INFINITY;
-        for (n, d, bounds) in &planes {
+        for (n, d, bounds) in planes {
             let t = d / (n[0] * ray[0] + n[1] * ray[1] + n[2] * ray[2]);
             let inside = bounds.is_none_or(|[x0, y0, x1, y1]| u > x0 && u < x1 && v > y0 && v < y1);
             if t > 0.3 && t < 8.0 && inside {
                 z = z.min(t);
             }
         }
-        if z.is_finite() { ((z * 1000.0).round() / 1000.0) as f32 } else { f32::NAN }
+        match (z.is_finite(), rounded) {
+            (false, _) => f32::NAN,
+            (true, true) => ((z * 1000.0).round() / 1000.0) as f32,
+            (true, false) => z as f32,
+        }
     });
     (range, rangeimage::Camera::Pinhole { fx, fy: fx, cx, cy, depth_scale: 1.0 })
 }
@@ -204,6 +219,34 @@ fn noise_free_quantised_depth_is_segmented_into_its_planes() {
     assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
     for p in &big {
         assert!(p.rms < 0.002, "each one plane: RMS {} m", p.rms);
+    }
+}
+
+#[test]
+fn noise_free_float_depth_is_segmented_into_its_planes() {
+    // A renderer's depth in metres, of a hall whose back wall and a box's front face the camera: most 5 × 5 windows
+    // hold one depth, so σ read 0, the frame ran in metres, and region growing's 3-unit limits grew the hall into one
+    // region. The pixel pitch gives σ a floor.
+    let (range, camera) = render_room(
+        &[
+            ([0.0, -1.0, 0.0], -1.0, None),
+            ([0.0, 0.0, 1.0], 3.0, None),
+            ([1.0, 0.0, 0.0], -1.5, None),
+            ([0.0, 0.0, 1.0], 2.0, Some([350.0, 150.0, 500.0, 380.0])),
+            ([0.3, 0.0, 1.0], 2.6, Some([120.0, 100.0, 300.0, 300.0])),
+        ],
+        false,
+    );
+    let out = rangeseg::segment(&range, &camera, &Config::default());
+    let units = out.units.expect("units of the frame");
+    let (_, pitch) = planefit::noise::step_geometry(&range, &camera, 0.0).expect("a pitch");
+    let expected = rangeseg::units::PINHOLE_SIGMA / (rangeseg::units::PINHOLE_PITCH_SHARE * pitch);
+    assert!((units.factor / expected - 1.0).abs() < 1e-9, "{units:?}, expected a factor of {expected}");
+    let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
+    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
+    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
+    for p in &big {
+        assert!(p.rms < 0.001, "each one plane: RMS {} m", p.rms);
     }
 }
 
