@@ -30,8 +30,8 @@ pub const PINHOLE_SIGMA: f64 = 0.25;
 /// Grid images whose σ lies within this range run in their own units; others are scaled to its nearest end.
 pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
 /// A pinhole image's σ is at least this share of its pixel pitch (the 3D distance between horizontally neighbouring
-/// pixels at the image centre and the image's mean depth): rendered depth without noise or rounding reads σ = 0 (or
-/// ~1e-6 m where the windows are not head-on), and would run in its own units, metres, where a room merges into one.
+/// pixels at the image centre and the image's mean depth): rendered depth without noise or rounding reads σ = 0 where
+/// most windows see walls head-on, and would run in its own units, metres, where a room merges into one.
 /// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
 pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
 /// Stride of the 5 × 5 windows σ is read from (1/16 of them).
