@@ -12,7 +12,8 @@
 //! result no longer depends on the depth unit (metres and centimetres give the same labels up to rounding).
 //! A grid image (pixel coordinates and raw depth values) is scaled only when its σ lies outside
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
-//! scale changes its angles. ABW images keep their calibrated units (the ABW camera is not linear in the
+//! scale changes its angles. So it is scaled up (or, noise-free, scaled at all) only until its steep slopes reach
+//! [`GRID_STEEP_SLOPE`]: steeper, planes' normals crowd together. ABW images keep their calibrated units (the ABW camera is not linear in the
 //! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
 //! ([`planefit::noise::step_from_smallest`]; the step test runs only when σ
 //! is below that): noise-free quantised depth (rendered, or a sensor that smooths before it rounds) reads
@@ -34,6 +35,14 @@ pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
 /// most windows see walls head-on, and would run in its own units, metres, where a room merges into one.
 /// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
 pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
+/// A grid image scaled up (σ below [`GRID_SIGMA_BAND`], or 0) is scaled at most as much as brings its steep slopes,
+/// the [`GRID_SLOPE_QUANTILE`] of its gradients, to this many depth units a pixel (and never down): on the grid camera
+/// a scale also steepens every slope, and planes whose slopes all exceed a few units a pixel have normals a few degrees
+/// apart, which region growing joins. A noise-free grid image (σ = 0) is scaled that much.
+pub const GRID_STEEP_SLOPE: f64 = 2.0;
+/// The share of an image's nonzero gradients (central differences, on every 4th pixel of every 4th row) below its
+/// steep slope ([`GRID_STEEP_SLOPE`]): above the noise of a flat wall, below the few jumps.
+pub const GRID_SLOPE_QUANTILE: f64 = 0.9;
 /// Stride of the 5 × 5 windows σ is read from (1/16 of them).
 pub(crate) const SAMPLE_STRIDE: usize = 4;
 
@@ -117,13 +126,48 @@ pub fn working_units_given(
     };
     let sigma =
         if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale).max(pitch_floor) };
-    let k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
+    let mut k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
+    // A grid image scaled up (or noise-free) only until its steep slopes reach GRID_STEEP_SLOPE.
+    if matches!(camera, Camera::Grid)
+        && sigma < lo
+        && let Some(steep) = steep_slope(range, scratch)
+    {
+        let cap = (GRID_STEEP_SLOPE / steep).max(1.0);
+        k = if sigma > 0.0 { k.min(cap) } else { cap };
+    }
     let camera = match *camera {
         Camera::Pinhole { fx, fy, cx, cy, .. } => Camera::Pinhole { fx, fy, cx, cy, depth_scale: 1.0 },
         other => other,
     };
     tracing::debug!(sigma, rounding, pitch_floor, factor = k * depth_scale, "working units");
     WorkingUnits { factor: k * depth_scale, camera }
+}
+
+/// The [`GRID_SLOPE_QUANTILE`] of the nonzero gradient magnitudes of `range` (central differences, on every
+/// [`SAMPLE_STRIDE`]-th pixel of every [`SAMPLE_STRIDE`]-th row), in depth units a pixel; `None` with fewer than 20.
+/// `scratch` holds the gradients (cleared first).
+fn steep_slope(range: &RangeImage, scratch: &mut Vec<f64>) -> Option<f64> {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let v = range.as_slice();
+    scratch.clear();
+    for y in (1..h.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
+        for x in (1..w.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
+            let i = y * w + x;
+            let gx = 0.5 * (f64::from(v[i + 1]) - f64::from(v[i - 1]));
+            let gy = 0.5 * (f64::from(v[i + w]) - f64::from(v[i - w]));
+            let g = gx.hypot(gy);
+            // (No data around the pixel gives NaN; a flat window of a noise-free image gives 0.)
+            if g > 0.0 && g.is_finite() {
+                scratch.push(g);
+            }
+        }
+    }
+    if scratch.len() < 20 {
+        return None;
+    }
+    let k = ((scratch.len() - 1) as f64 * GRID_SLOPE_QUANTILE).round() as usize;
+    let (_, g, _) = scratch.select_nth_unstable_by(k, f64::total_cmp);
+    Some(*g)
 }
 
 /// The working units `config` asks for: [`working_units_with`] when `pipeline.normalize_units` is on, else the
@@ -231,11 +275,39 @@ mod tests {
 
     #[test]
     fn grid_images_outside_the_band_go_to_its_nearest_end() {
-        for (amp, end) in [(0.002f32, GRID_SIGMA_BAND.0), (40.0, GRID_SIGMA_BAND.1)] {
-            let img = plane(amp);
+        // (A slope of 0.001 and 0.002 a pixel, so that slopes do not limit the scale up: below.)
+        let img: RangeImage = Grid::from_fn(64, 48, |x, y| {
+            let wiggle = if (x * 7 + y * 13) % 5 < 2 { 0.002 } else { -0.002 };
+            1.0 + 0.001 * x as f32 + 0.002 * y as f32 + wiggle
+        });
+        for (img, end) in [(img, GRID_SIGMA_BAND.0), (plane(40.0), GRID_SIGMA_BAND.1)] {
             let (s, _) = working_sigma(&img, &working_units(&img, &Camera::Grid));
-            assert!((s / end - 1.0).abs() < 1e-4, "amp {amp}: working σ {s}, expected {end}");
+            assert!((s / end - 1.0).abs() < 1e-4, "working σ {s}, expected {end}");
         }
+    }
+
+    #[test]
+    fn grid_images_are_scaled_up_only_until_their_steep_slopes_reach_the_limit() {
+        // Slopes of 0.01 and 0.02 a pixel (steep slope 0.023 with the noise's) and σ = 0.0021: the band's 0.25 would
+        // scale it 118 times, to steep slopes of 2.8 a pixel; the limit, 85 times.
+        let img = plane(0.002);
+        let u = working_units(&img, &Camera::Grid);
+        let mut scaled = RangeImage::default();
+        u.scale_into(&img, &mut scaled);
+        let steep = steep_slope(&scaled, &mut Vec::new()).expect("slopes");
+        assert!((steep / GRID_STEEP_SLOPE - 1.0).abs() < 1e-3, "{u:?}: steep slope {steep}");
+        assert!(working_sigma(&img, &u).0 < GRID_SIGMA_BAND.0, "{u:?}");
+        // (Noise-free grid depth, σ = 0, is scaled as far: tests/pipeline.rs, `noise_free_float_disparity_…`.)
+        // Slopes already steeper than the limit: never scaled down below the image's own units.
+        let steep: RangeImage = Grid::from_fn(64, 48, |x, y| 1.0 + 5.0 * x as f32 + 0.02 * y as f32);
+        assert!(working_units(&steep, &Camera::Grid).is_identity());
+        // And the pinhole camera has no such limit.
+        assert!(
+            (working_units(&img, &PIN).factor
+                - PINHOLE_SIGMA / planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE))
+            .abs()
+                < 1e-9
+        );
     }
 
     #[test]

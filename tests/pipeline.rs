@@ -227,16 +227,7 @@ fn noise_free_float_depth_is_segmented_into_its_planes() {
     // A renderer's depth in metres, of a hall whose back wall and a box's front face the camera: most 5 × 5 windows
     // hold one depth, so σ read 0, the frame ran in metres, and region growing's 3-unit limits grew the hall into one
     // region. The pixel pitch gives σ a floor.
-    let (range, camera) = render_room(
-        &[
-            ([0.0, -1.0, 0.0], -1.0, None),
-            ([0.0, 0.0, 1.0], 3.0, None),
-            ([1.0, 0.0, 0.0], -1.5, None),
-            ([0.0, 0.0, 1.0], 2.0, Some([350.0, 150.0, 500.0, 380.0])),
-            ([0.3, 0.0, 1.0], 2.6, Some([120.0, 100.0, 300.0, 300.0])),
-        ],
-        false,
-    );
+    let (range, camera) = hall();
     let out = rangeseg::segment(&range, &camera, &Config::default());
     let units = out.units.expect("units of the frame");
     let (_, pitch) = planefit::noise::step_geometry(&range, &camera, 0.0).expect("a pitch");
@@ -247,6 +238,39 @@ fn noise_free_float_depth_is_segmented_into_its_planes() {
     assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
     for p in &big {
         assert!(p.rms < 0.001, "each one plane: RMS {} m", p.rms);
+    }
+}
+
+/// The hall of `noise_free_float_depth_is_segmented_into_its_planes`: a floor, a back wall and a side wall facing the
+/// camera or not, a box's front face and a slanted panel.
+fn hall() -> (rangeimage::RangeImage, rangeimage::Camera) {
+    render_room(
+        &[
+            ([0.0, -1.0, 0.0], -1.0, None),
+            ([0.0, 0.0, 1.0], 3.0, None),
+            ([1.0, 0.0, 0.0], -1.5, None),
+            ([0.0, 0.0, 1.0], 2.0, Some([350.0, 150.0, 500.0, 380.0])),
+            ([0.3, 0.0, 1.0], 2.6, Some([120.0, 100.0, 300.0, 300.0])),
+        ],
+        false,
+    )
+}
+
+#[test]
+fn noise_free_float_disparity_is_segmented_into_its_planes() {
+    // The hall as a renderer's float disparity (525 px × 10 cm / depth) on the grid camera: its slopes are
+    // 0.01–0.2 px a pixel, so every plane's normal lay within 11° of the others'. σ = 0 left it as it was and region
+    // growing grew it into one region (2 final regions of ≥ 5000 px). Scaled until its steep slopes are
+    // `GRID_STEEP_SLOPE` a pixel, the normals spread.
+    let (depth, _) = hall();
+    let range = depth.map(|&z| 52.5 / z);
+    let out = rangeseg::segment(&range, &rangeimage::Camera::Grid, &Config::default());
+    assert!(out.units.is_some_and(|u| u.factor > 10.0), "{:?}", out.units);
+    let planes = rangeseg::planes(&range, &out.fin.labels, &rangeimage::Camera::Grid);
+    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
+    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
+    for p in &big {
+        assert!(p.rms < 0.01, "each one plane: RMS {} px", p.rms);
     }
 }
 
