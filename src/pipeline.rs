@@ -37,7 +37,9 @@ pub struct Output {
     /// Time per stage.
     pub timings: StageTimings,
     /// The image's working units ([`crate::units`]): `features`, the regions' plane offsets and RMS and the
-    /// final regions' planes are in units of depth × `units.factor`; labels, edges and normals do not depend on it.
+    /// final regions' planes are in units of depth × `units.factor`, seen through `units.camera`; the regions' normals
+    /// are those of the input's geometry (a grid image's scale changes its slopes, so its normals are those of the
+    /// scaled depth).
     pub units: Option<WorkingUnits>,
     /// The step of the depth if it was a staircase, dequantised before the stages ran ([`crate::dequantise`]);
     /// `features` and the regions' planes then describe the dequantised depth (`rangeseg::planes` fits the input
@@ -186,6 +188,10 @@ impl Segmenter {
 
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
+        // The regions' normals in the input's geometry (a stretched image's working normals are tilted).
+        for r in out.regions.regions.iter_mut().chain(out.fin.final_regions.iter_mut()) {
+            r.normal = units.input_normal(r.normal);
+        }
         out.units = Some(units);
         out.dequantised = step;
         scratch.work = work;

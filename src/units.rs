@@ -35,6 +35,12 @@ pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
 /// most windows see walls head-on, and would run in its own units, metres, where a room merges into one.
 /// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
 pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
+/// A pinhole image whose σ exceeds this many pixel pitches is stretched across: seen through a camera of focal length
+/// divided by σ / (this × pitch), its rows and columns spread against its depth ([`WorkingUnits::stretch`]). Its 5 × 5
+/// windows then span more than its noise, so their normals mean something; the stretch is an affine map of its 3D
+/// points, so planes stay planes (their normals tilt, and are tilted back: [`WorkingUnits::input_normal`]). Kinect-like
+/// depth (σ ∝ depth², several pitches on far walls) needs it; the NYU frames read at most 1.36 pitches.
+pub const PINHOLE_MAX_NOISE_PITCHES: f64 = 1.75;
 /// A grid image scaled up (σ below [`GRID_SIGMA_BAND`], or 0) is scaled at most as much as brings its steep slopes,
 /// the [`GRID_SLOPE_QUANTILE`] of its gradients, to this many depth units a pixel (and never down): on the grid camera
 /// a scale also steepens every slope, and planes whose slopes all exceed a few units a pixel have normals a few degrees
@@ -51,15 +57,32 @@ pub(crate) const SAMPLE_STRIDE: usize = 4;
 pub struct WorkingUnits {
     /// What every depth value is multiplied by (1 = the image as it is).
     pub factor: f64,
-    /// The camera of the scaled image (a pinhole's `depth_scale` folded into `factor`).
+    /// The camera of the scaled image (a pinhole's `depth_scale` folded into `factor`, its focal lengths divided by
+    /// `stretch`).
     pub camera: Camera,
+    /// How much farther apart `camera` sees neighbouring pixels than depth × `factor` alone would (1 = a similarity
+    /// of the input's 3D points; see [`PINHOLE_MAX_NOISE_PITCHES`]).
+    pub stretch: f64,
 }
 
 impl WorkingUnits {
     /// The image as it is.
     #[must_use]
     pub fn identity(camera: &Camera) -> Self {
-        Self { factor: 1.0, camera: *camera }
+        Self { factor: 1.0, camera: *camera, stretch: 1.0 }
+    }
+
+    /// The unit normal, in the input's 3D geometry, of a plane whose normal in the working geometry is `n` (the same
+    /// orientation toward the sensor): the stretch multiplies x and y by `stretch`, so the normal's x and y are.
+    #[must_use]
+    pub fn input_normal(&self, n: [f32; 3]) -> [f32; 3] {
+        if self.stretch == 1.0 {
+            return n;
+        }
+        let s = self.stretch;
+        let v = [s * f64::from(n[0]), s * f64::from(n[1]), f64::from(n[2])];
+        let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if len > 0.0 { [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32] } else { n }
     }
 
     /// Whether the image runs as it is.
@@ -119,13 +142,16 @@ pub fn working_units_given(
     };
     // Noise-free depth without a step has neither: the pixel pitch gives a pinhole image its floor (a grid image's
     // scale is also its slopes' unit, so it has none).
-    let pitch_floor = match *camera {
-        Camera::Pinhole { .. } => planefit::noise::step_geometry(range, camera, 0.0)
-            .map_or(0.0, |(_, pitch)| PINHOLE_PITCH_SHARE * pitch),
-        _ => 0.0,
+    let pitch = match *camera {
+        Camera::Pinhole { .. } => planefit::noise::step_geometry(range, camera, 0.0).map(|(_, pitch)| pitch),
+        _ => None,
     };
+    let pitch_floor = pitch.map_or(0.0, |p| PINHOLE_PITCH_SHARE * p);
     let sigma =
         if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale).max(pitch_floor) };
+    // (NaN σ or no pitch: no stretch.)
+    let stretch = pitch.map_or(1.0, |p| (sigma / (PINHOLE_MAX_NOISE_PITCHES * p)).max(1.0));
+    let stretch = if stretch.is_finite() { stretch } else { 1.0 };
     let mut k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
     // A grid image scaled up (or noise-free) only until its steep slopes reach GRID_STEEP_SLOPE.
     if matches!(camera, Camera::Grid)
@@ -136,11 +162,13 @@ pub fn working_units_given(
         k = if sigma > 0.0 { k.min(cap) } else { cap };
     }
     let camera = match *camera {
-        Camera::Pinhole { fx, fy, cx, cy, .. } => Camera::Pinhole { fx, fy, cx, cy, depth_scale: 1.0 },
+        Camera::Pinhole { fx, fy, cx, cy, .. } => {
+            Camera::Pinhole { fx: fx / stretch, fy: fy / stretch, cx, cy, depth_scale: 1.0 }
+        }
         other => other,
     };
-    tracing::debug!(sigma, rounding, pitch_floor, factor = k * depth_scale, "working units");
-    WorkingUnits { factor: k * depth_scale, camera }
+    tracing::debug!(sigma, rounding, ?pitch, factor = k * depth_scale, stretch, "working units");
+    WorkingUnits { factor: k * depth_scale, camera, stretch }
 }
 
 /// The [`GRID_SLOPE_QUANTILE`] of the nonzero gradient magnitudes of `range` (central differences, on every
@@ -311,13 +339,40 @@ mod tests {
     }
 
     #[test]
+    fn pinhole_images_noisier_than_the_limit_are_stretched_across() {
+        // Depth about 1.5 seen at 500 px: a pitch of 0.0031, against σ = 0.00053 (no stretch) or 0.053 (9.8).
+        for (amp, stretched) in [(0.0005f32, false), (0.05, true)] {
+            let img = plane(amp);
+            let u = working_units(&img, &PIN);
+            let s = planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE);
+            let (_, pitch) = planefit::noise::step_geometry(&img, &PIN, 0.0).expect("a pitch");
+            let expected = if stretched { s / (PINHOLE_MAX_NOISE_PITCHES * pitch) } else { 1.0 };
+            assert!((u.stretch / expected - 1.0).abs() < 1e-9, "amp {amp}: {u:?}, expected {expected}");
+            assert!(!stretched || u.stretch > 4.0, "amp {amp}: {u:?}");
+            let f = 500.0 / u.stretch;
+            assert_eq!(u.camera, Camera::Pinhole { fx: f, fy: f, cx: 32.0, cy: 24.0, depth_scale: 1.0 });
+        }
+        // A plane's normal in the stretched geometry, tilted back: x and y times the stretch, renormalised.
+        let u = WorkingUnits { factor: 1.0, camera: PIN, stretch: 2.0 };
+        let n = u.input_normal([0.6, 0.0, -0.8]);
+        let len = 1.2f64.hypot(0.8);
+        for (got, want) in n.iter().zip([1.2 / len, 0.0, -0.8 / len]) {
+            assert!((f64::from(*got) - want).abs() < 1e-6, "{n:?}");
+        }
+        assert_eq!(u.input_normal([0.0, 0.0, -1.0]), [0.0, 0.0, -1.0]);
+        assert_eq!(WorkingUnits::identity(&PIN).input_normal([0.6, 0.0, -0.8]), [0.6, 0.0, -0.8]);
+    }
+
+    #[test]
     fn a_pinhole_depth_scale_is_folded_into_the_factor() {
         let img = plane(0.4);
         let cam = Camera::Pinhole { fx: 500.0, fy: 500.0, cx: 32.0, cy: 24.0, depth_scale: 0.25 };
         let u = working_units(&img, &cam);
         let s = planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE);
         assert!((u.factor - PINHOLE_SIGMA / s).abs() < 1e-12, "{u:?}");
-        assert_eq!(u.camera, PIN);
+        // (Noise of 0.1 m at 0.3 m, far more than the pitch: stretched across, below.)
+        let f = 500.0 / u.stretch;
+        assert_eq!(u.camera, Camera::Pinhole { fx: f, fy: f, cx: 32.0, cy: 24.0, depth_scale: 1.0 });
         // Noise-free depth (σ = 0): σ is a share of the pixel pitch, 0.5 m / 500 px at the depth of 2 × 0.25 m.
         let flat = Grid::new(64, 48, 2.0f32);
         let expected = 0.25 * PINHOLE_SIGMA / (PINHOLE_PITCH_SHARE * 0.5 / 500.0);
