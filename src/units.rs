@@ -22,6 +22,8 @@
 //! share of its step's rounding error instead ([`crate::dequantise::SIGMA_FLOOR_SHARE`]).
 //! Depth with neither noise nor a step (a renderer's floats) reads σ = 0 or float rounding: a pinhole image's σ is at
 //! least [`PINHOLE_PITCH_SHARE`] of its pixel pitch.
+//! A pinhole or ABW image whose σ exceeds [`MAX_NOISE_PITCHES`] pixel pitches is also stretched across (its camera's
+//! focal length divided): an affine map of its 3D points under which 5 × 5 windows span more than the noise.
 
 use rangeimage::{Camera, RangeImage};
 
@@ -35,12 +37,13 @@ pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
 /// most windows see walls head-on, and would run in its own units, metres, where a room merges into one.
 /// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
 pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
-/// A pinhole image whose σ exceeds this many pixel pitches is stretched across: seen through a camera of focal length
-/// divided by σ / (this × pitch), its rows and columns spread against its depth ([`WorkingUnits::stretch`]). Its 5 × 5
-/// windows then span more than its noise, so their normals mean something; the stretch is an affine map of its 3D
-/// points, so planes stay planes (their normals tilt, and are tilted back: [`WorkingUnits::input_normal`]). Kinect-like
-/// depth (σ ∝ depth², several pitches on far walls) needs it; the NYU frames read at most 1.36 pitches.
-pub const PINHOLE_MAX_NOISE_PITCHES: f64 = 1.75;
+/// A pinhole or ABW image whose σ exceeds this many pixel pitches is stretched across: seen through a camera of focal
+/// length divided by σ / (this × pitch), its rows and columns spread against its depth ([`WorkingUnits::stretch`]).
+/// Its 5 × 5 windows then span more than its noise, so their normals mean something; the stretch is an affine map of
+/// its 3D points, so planes stay planes (their normals tilt, and are tilted back: [`WorkingUnits::input_normal`]).
+/// Kinect-like depth (σ ∝ depth², several pitches on far walls) needs it; the NYU frames read at most 1.36 pitches,
+/// the synthetic benchmark 1.53, the real ABW images 1.03.
+pub const MAX_NOISE_PITCHES: f64 = 2.0;
 /// A grid image scaled up (σ below [`GRID_SIGMA_BAND`], or 0) is scaled at most as much as brings its steep slopes,
 /// the [`GRID_SLOPE_QUANTILE`] of its gradients, to this many depth units a pixel (and never down): on the grid camera
 /// a scale also steepens every slope, and planes whose slopes all exceed a few units a pixel have normals a few degrees
@@ -61,7 +64,7 @@ pub struct WorkingUnits {
     /// `stretch`).
     pub camera: Camera,
     /// How much farther apart `camera` sees neighbouring pixels than depth × `factor` alone would (1 = a similarity
-    /// of the input's 3D points; see [`PINHOLE_MAX_NOISE_PITCHES`]).
+    /// of the input's 3D points; see [`MAX_NOISE_PITCHES`]).
     pub stretch: f64,
 }
 
@@ -85,7 +88,7 @@ impl WorkingUnits {
         if len > 0.0 { [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32] } else { n }
     }
 
-    /// Whether the image runs as it is.
+    /// Whether the depth values run as they are (the camera may still be stretched across: `stretch`).
     #[must_use]
     pub fn is_identity(&self) -> bool {
         self.factor == 1.0
@@ -124,7 +127,15 @@ pub fn working_units_given(
     scratch: &mut Vec<f64>,
 ) -> WorkingUnits {
     let (depth_scale, (lo, hi)) = match *camera {
-        Camera::Abw(_) => return WorkingUnits::identity(camera),
+        // ABW images keep their calibrated units; only a noisy one is stretched across.
+        Camera::Abw(cal) => {
+            let sigma =
+                sigma.unwrap_or_else(|| planefit::noise::sigma_sampled_with(range, SAMPLE_STRIDE, scratch));
+            let stretch = stretch_for(sigma, range, camera);
+            tracing::debug!(sigma, stretch, "working units");
+            let camera = Camera::Abw(rangeimage::AbwCalibration { f: cal.f / stretch, ..cal });
+            return WorkingUnits { factor: 1.0, camera, stretch };
+        }
         Camera::Pinhole { depth_scale, .. } => (depth_scale, (PINHOLE_SIGMA, PINHOLE_SIGMA)),
         Camera::Grid => (1.0, GRID_SIGMA_BAND),
     };
@@ -149,9 +160,7 @@ pub fn working_units_given(
     let pitch_floor = pitch.map_or(0.0, |p| PINHOLE_PITCH_SHARE * p);
     let sigma =
         if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale).max(pitch_floor) };
-    // (NaN σ or no pitch: no stretch.)
-    let stretch = pitch.map_or(1.0, |p| (sigma / (PINHOLE_MAX_NOISE_PITCHES * p)).max(1.0));
-    let stretch = if stretch.is_finite() { stretch } else { 1.0 };
+    let stretch = pitch.map_or(1.0, |p| stretch_of(sigma, p));
     let mut k = if sigma.is_finite() && sigma > 0.0 { sigma.clamp(lo, hi) / sigma } else { 1.0 };
     // A grid image scaled up (or noise-free) only until its steep slopes reach GRID_STEEP_SLOPE.
     if matches!(camera, Camera::Grid)
@@ -169,6 +178,20 @@ pub fn working_units_given(
     };
     tracing::debug!(sigma, rounding, ?pitch, factor = k * depth_scale, stretch, "working units");
     WorkingUnits { factor: k * depth_scale, camera, stretch }
+}
+
+/// How far an image of noise `sigma` and pixel pitch `pitch` (3D units) is stretched across ([`MAX_NOISE_PITCHES`]):
+/// at least 1 (NaN σ: 1).
+fn stretch_of(sigma: f64, pitch: f64) -> f64 {
+    let stretch = (sigma / (MAX_NOISE_PITCHES * pitch)).max(1.0);
+    if stretch.is_finite() { stretch } else { 1.0 }
+}
+
+/// [`stretch_of`] an ABW image of noise `sigma` (in stored values, turned into 3D units by the 3D length of one
+/// value's step) seen through `camera` (1 without a pitch).
+fn stretch_for(sigma: f64, range: &RangeImage, camera: &Camera) -> f64 {
+    planefit::noise::step_geometry(range, camera, 1.0)
+        .map_or(1.0, |(step, pitch)| stretch_of(sigma * step, pitch))
 }
 
 /// The [`GRID_SLOPE_QUANTILE`] of the nonzero gradient magnitudes of `range` (central differences, on every
@@ -346,12 +369,17 @@ mod tests {
             let u = working_units(&img, &PIN);
             let s = planefit::noise::sigma_sampled(&img, SAMPLE_STRIDE);
             let (_, pitch) = planefit::noise::step_geometry(&img, &PIN, 0.0).expect("a pitch");
-            let expected = if stretched { s / (PINHOLE_MAX_NOISE_PITCHES * pitch) } else { 1.0 };
+            let expected = if stretched { s / (MAX_NOISE_PITCHES * pitch) } else { 1.0 };
             assert!((u.stretch / expected - 1.0).abs() < 1e-9, "amp {amp}: {u:?}, expected {expected}");
             assert!(!stretched || u.stretch > 4.0, "amp {amp}: {u:?}");
             let f = 500.0 / u.stretch;
             assert_eq!(u.camera, Camera::Pinhole { fx: f, fy: f, cx: 32.0, cy: 24.0, depth_scale: 1.0 });
         }
+        // An ABW image keeps its units, but a noisy one is stretched too: its focal length divided.
+        let u = working_units(&plane(5.0), &Camera::ABW0);
+        assert!(u.factor == 1.0 && u.stretch > 2.0, "{u:?}");
+        let cal = rangeimage::AbwCalibration::CAL0;
+        assert_eq!(u.camera, Camera::Abw(rangeimage::AbwCalibration { f: cal.f / u.stretch, ..cal }));
         // A plane's normal in the stretched geometry, tilted back: x and y times the stretch, renormalised.
         let u = WorkingUnits { factor: 1.0, camera: PIN, stretch: 2.0 };
         let n = u.input_normal([0.6, 0.0, -0.8]);
