@@ -13,8 +13,8 @@
 //! A grid image (pixel coordinates and raw depth values) is scaled only when its σ lies outside
 //! [`GRID_SIGMA_BAND`], to the band's nearest end: its depth unit is also the unit of its slopes, so a
 //! scale changes its angles. So it is scaled up (or, noise-free, scaled at all) only until its steep slopes reach
-//! [`GRID_STEEP_SLOPE`]: steeper, planes' normals crowd together. ABW images keep their calibrated units (the ABW camera is not linear in the
-//! stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
+//! [`GRID_STEEP_SLOPE`]: steeper, planes' normals crowd together. ABW images keep their calibrated units (the ABW
+//! camera is not linear in the stored value). σ is at least the rounding error of the image's depth step q, `q / √12`
 //! ([`planefit::noise::step_from_smallest`]; the step test runs only when σ
 //! is below that): noise-free quantised depth (rendered, or a sensor that smooths before it rounds) reads
 //! σ ≈ 0 where most windows lie within one step, and scaled by that, every step became a jump. docs/method.md §2.5 has the measurements.
