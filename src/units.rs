@@ -249,15 +249,16 @@ pub fn for_config_given(
     }
 }
 
-/// `range` and `camera` in the working units `config` asks for (borrowed when they are the image's own), and
-/// dequantised first if it is a staircase ([`crate::dequantise`]): what [`crate::pipeline::Segmenter`] runs the
-/// stages on, for callers that run single stages.
+/// `range` in the working units `config` asks for (borrowed when they are the image's own), and dequantised first
+/// if it is a staircase ([`crate::dequantise`]), with those units (their `camera` is the one to run it through):
+/// what [`crate::pipeline::Segmenter`] runs the stages on, for callers that run single stages (the regions' normals
+/// they get are the working geometry's: [`WorkingUnits::input_normal`] tilts them back).
 #[must_use]
 pub fn in_working_units<'a>(
     range: &'a RangeImage,
     camera: &Camera,
     config: &crate::Config,
-) -> (std::borrow::Cow<'a, RangeImage>, Camera) {
+) -> (std::borrow::Cow<'a, RangeImage>, WorkingUnits) {
     let mut noise = Vec::new();
     let prepared = crate::dequantise::for_config(range, camera, config, &mut noise, &mut Default::default());
     let floor = prepared.sigma_floor();
@@ -266,11 +267,11 @@ pub fn in_working_units<'a>(
     let units = for_config_given(input, camera, config, prepared.sigma, floor, &mut noise);
     if units.is_identity() {
         let out = dequantised.map_or(std::borrow::Cow::Borrowed(range), std::borrow::Cow::Owned);
-        return (out, units.camera);
+        return (out, units);
     }
     let mut out = RangeImage::default();
     units.scale_into(input, &mut out);
-    (std::borrow::Cow::Owned(out), units.camera)
+    (std::borrow::Cow::Owned(out), units)
 }
 
 #[cfg(test)]
@@ -430,7 +431,8 @@ mod tests {
             ((v / 3.0).round() * 3.0) as f32
         });
         let config = crate::Config::default();
-        let (range, camera) = in_working_units(&img, &Camera::ABW0, &config);
+        let (range, units) = in_working_units(&img, &Camera::ABW0, &config);
+        let camera = units.camera;
         let expected = crate::dequantise::dequantise(&img, 3.0, &mut Default::default());
         assert!(matches!(range, std::borrow::Cow::Owned(_)) && *range == expected && *range != img);
         assert_eq!(camera, Camera::ABW0);

@@ -30,9 +30,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let seed = args.seed.unwrap_or(cfg.seed);
     super::prepare_out_dir(&args.out)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
-    let (range, camera) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
+    let (range, units) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
     let feats = features::compute(&range, &cfg.features);
-    let (seg, info) = regiongrow::grow(&range, &feats, &camera, &cfg.regiongrow, seed);
+    let (mut seg, info) = regiongrow::grow(&range, &feats, &units.camera, &cfg.regiongrow, seed);
+    // The normals the .ms-nor holds, in the input's geometry.
+    for r in &mut seg.regions {
+        r.normal = units.input_normal(r.normal);
+    }
 
     let name =
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());

@@ -456,7 +456,7 @@ fn read_images(sets: &[DataSet]) -> Result<Vec<Image>> {
         for img in &set.images {
             let loaded = img.load()?;
             // In the working units the pipeline runs it in (`normalize_units` is not tuned).
-            let (range, camera) = rangeseg::units::in_working_units(
+            let (range, units) = rangeseg::units::in_working_units(
                 &loaded.frame.range,
                 &loaded.frame.camera,
                 &rangeseg::Config::default(),
@@ -465,7 +465,7 @@ fn read_images(sets: &[DataSet]) -> Result<Vec<Image>> {
                 set: k,
                 stem: loaded.stem,
                 range: range.into_owned(),
-                camera,
+                camera: units.camera,
                 gt: loaded.gt,
                 angles: loaded.angles,
             });
