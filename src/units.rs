@@ -32,9 +32,10 @@ use rangeimage::{Camera, RangeImage};
 pub const PINHOLE_SIGMA: f64 = 0.25;
 /// Grid images whose σ lies within this range run in their own units; others are scaled to its nearest end.
 pub const GRID_SIGMA_BAND: (f64, f64) = (0.25, 1.0);
-/// A pinhole image's σ is at least this share of its pixel pitch (the 3D distance between horizontally neighbouring
-/// pixels at the image centre and the image's mean depth): rendered depth without noise or rounding reads σ = 0 where
-/// most windows see walls head-on, and would run in its own units, metres, where a room merges into one.
+/// A pinhole image without a depth step (neither rounded nor dequantised) has a σ of at least this share of its pixel
+/// pitch (the 3D distance between horizontally neighbouring pixels at the image centre and the image's mean depth):
+/// rendered depth without noise or rounding reads σ = 0 where most windows see walls head-on, and would run in its own
+/// units, metres, where a room merges into one.
 /// The real sensor frames we have (Kinect, stereo, structured light) read 0.3–2 pitches, so the floor leaves them alone.
 pub const PINHOLE_PITCH_SHARE: f64 = 0.1;
 /// A pinhole or ABW image whose σ exceeds this many pixel pitches is stretched across: seen through a camera of focal
@@ -152,12 +153,13 @@ pub fn working_units_given(
         _ => 0.0,
     };
     // Noise-free depth without a step has neither: the pixel pitch gives a pinhole image its floor (a grid image's
-    // scale is also its slopes' unit, so it has none).
+    // scale is also its slopes' unit, so it has none; a stepped or dequantised image has its step's).
     let pitch = match *camera {
         Camera::Pinhole { .. } => planefit::noise::step_geometry(range, camera, 0.0).map(|(_, pitch)| pitch),
         _ => None,
     };
-    let pitch_floor = pitch.map_or(0.0, |p| PINHOLE_PITCH_SHARE * p);
+    let stepped = rounding > 0.0 || floor > 0.0;
+    let pitch_floor = pitch.filter(|_| !stepped).map_or(0.0, |p| PINHOLE_PITCH_SHARE * p);
     let sigma =
         if sigma.is_nan() { sigma } else { sigma.max(rounding).max(floor * depth_scale).max(pitch_floor) };
     let stretch = pitch.map_or(1.0, |p| stretch_of(sigma, p));
