@@ -189,9 +189,8 @@ impl Segmenter {
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
         // The regions' normals in the input's geometry (a stretched image's working normals are tilted).
-        for r in out.regions.regions.iter_mut().chain(out.fin.final_regions.iter_mut()) {
-            r.normal = units.input_normal(r.normal);
-        }
+        units.input_normals(&mut out.regions.regions);
+        units.input_normals(&mut out.fin.final_regions);
         out.units = Some(units);
         out.dequantised = step;
         scratch.work = work;

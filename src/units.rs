@@ -89,6 +89,14 @@ impl WorkingUnits {
         if len > 0.0 { [(v[0] / len) as f32, (v[1] / len) as f32, (v[2] / len) as f32] } else { n }
     }
 
+    /// Tilts the normals of `regions`, found in these working units, back to the input's geometry
+    /// ([`WorkingUnits::input_normal`]).
+    pub fn input_normals(&self, regions: &mut [rangeimage::Region]) {
+        for r in regions {
+            r.normal = self.input_normal(r.normal);
+        }
+    }
+
     /// Whether the depth values run as they are (the camera may still be stretched across: `stretch`).
     #[must_use]
     pub fn is_identity(&self) -> bool {

@@ -161,6 +161,23 @@ fn the_result_does_not_depend_on_the_depth_unit() {
     assert!(differ * 1000 < a.len(), "{differ} of {} labels differ between metres and centimetres", a.len());
 }
 
+/// Asserts that the final segmentation `out` of `range` (seen through `camera`) has at least `count` regions of 5000 px
+/// or more, each one plane: the RMS of its input points about their plane under `max_rms` (input units).
+fn assert_planes_of_5000_px(
+    range: &rangeimage::RangeImage,
+    out: &rangeseg::pipeline::Output,
+    camera: &rangeimage::Camera,
+    count: usize,
+    max_rms: f64,
+) {
+    let planes = rangeseg::planes(range, &out.fin.labels, camera);
+    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
+    assert!(big.len() >= count, "{} planes of ≥ 5000 px: {planes:?}", big.len());
+    for p in &big {
+        assert!(p.rms < max_rms, "each one plane: RMS {} (at most {max_rms})", p.rms);
+    }
+}
+
 /// A noise-free rendered room as a depth sensor without noise would store it: floor, back wall, two side walls
 /// and a slanted panel, seen by a 640 × 480 pinhole camera, depth in metres rounded to whole millimetres.
 fn noise_free_room() -> (rangeimage::RangeImage, rangeimage::Camera) {
@@ -228,12 +245,7 @@ fn noise_free_quantised_depth_is_segmented_into_its_planes() {
     let units = out.units.expect("units of the frame");
     let rounding = 0.001 / 12f64.sqrt();
     assert!(units.factor <= 1.01 * rangeseg::units::PINHOLE_SIGMA / rounding, "{units:?}");
-    let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
-    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
-    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
-    for p in &big {
-        assert!(p.rms < 0.002, "each one plane: RMS {} m", p.rms);
-    }
+    assert_planes_of_5000_px(&range, &out, &camera, 5, 0.002);
 }
 
 #[test]
@@ -247,12 +259,7 @@ fn noise_free_float_depth_is_segmented_into_its_planes() {
     let (_, pitch) = planefit::noise::step_geometry(&range, &camera, 0.0).expect("a pitch");
     let expected = rangeseg::units::PINHOLE_SIGMA / (rangeseg::units::PINHOLE_PITCH_SHARE * pitch);
     assert!((units.factor / expected - 1.0).abs() < 1e-9, "{units:?}, expected a factor of {expected}");
-    let planes = rangeseg::planes(&range, &out.fin.labels, &camera);
-    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
-    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
-    for p in &big {
-        assert!(p.rms < 0.001, "each one plane: RMS {} m", p.rms);
-    }
+    assert_planes_of_5000_px(&range, &out, &camera, 5, 0.001);
 }
 
 /// The hall of `noise_free_float_depth_is_segmented_into_its_planes`: a floor, a back wall and a side wall facing the
@@ -328,12 +335,7 @@ fn noise_free_float_disparity_is_segmented_into_its_planes() {
     let range = depth.map(|&z| 52.5 / z);
     let out = rangeseg::segment(&range, &rangeimage::Camera::Grid, &Config::default());
     assert!(out.units.is_some_and(|u| u.factor > 10.0), "{:?}", out.units);
-    let planes = rangeseg::planes(&range, &out.fin.labels, &rangeimage::Camera::Grid);
-    let big: Vec<_> = planes.iter().filter(|p| p.pixels >= 5000).collect();
-    assert!(big.len() >= 5, "{} planes of ≥ 5000 px: {planes:?}", big.len());
-    for p in &big {
-        assert!(p.rms < 0.01, "each one plane: RMS {} px", p.rms);
-    }
+    assert_planes_of_5000_px(&range, &out, &rangeimage::Camera::Grid, 5, 0.01);
 }
 
 #[test]

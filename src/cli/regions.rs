@@ -34,9 +34,7 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     let feats = features::compute(&range, &cfg.features);
     let (mut seg, info) = regiongrow::grow(&range, &feats, &units.camera, &cfg.regiongrow, seed);
     // The normals the .ms-nor holds, in the input's geometry.
-    for r in &mut seg.regions {
-        r.normal = units.input_normal(r.normal);
-    }
+    units.input_normals(&mut seg.regions);
 
     let name =
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
