@@ -22,8 +22,8 @@ pub enum FinalEdges {
     /// parallel lines along one boundary).
     Relaxed,
     /// The borders between the final segmentation's regions ([`rangeimage::boundary::label_boundaries`], every
-    /// non-zero label a region): one boundary per pair of final regions, shaped by both edge sets through
-    /// the segmentation.
+    /// non-zero label a region, after the gaps of [`PipelineParams::edge_gap_px`] are split): one boundary per
+    /// pair of final regions, shaped by both edge sets through the segmentation.
     #[default]
     Segmentation,
 }
@@ -38,6 +38,9 @@ pub struct PipelineParams {
     pub relax: bool,
     /// What the final edge map C is.
     pub final_edges: FinalEdges,
+    /// With `final_edges = segmentation`: valid unlabelled pixels within this many pixels of a region are given to the
+    /// nearest one before the borders are drawn ([`rangeimage::boundary::split_gaps_into`]; 0 = off).
+    pub edge_gap_px: u32,
     /// Run pinhole images (and grid images of unusual noise) in working units of a fixed noise level ([`crate::units`]).
     pub normalize_units: bool,
     /// Dequantise depth rounded to steps coarser than its noise before the stages run ([`crate::dequantise`]).
@@ -50,6 +53,7 @@ impl Default for PipelineParams {
             c1_strength: C1Strength::default(),
             relax: true,
             final_edges: FinalEdges::default(),
+            edge_gap_px: 2,
             normalize_units: true,
             dequantise: true,
         }
@@ -288,6 +292,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "pipeline.final_edges",
         "Final edge map C: \"segmentation\" (the final regions' borders) or \"relaxed\" (C1 ∪ supported C2, the paper).",
+    ),
+    (
+        "pipeline.edge_gap_px",
+        "Final edge map \"segmentation\": unlabelled pixels within this many pixels of a region go to the nearest one before the borders are drawn (0 = off).",
     ),
     (
         "pipeline.normalize_units",

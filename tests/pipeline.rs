@@ -62,19 +62,37 @@ fn final_edges_are_the_final_segmentation_borders_or_the_relaxed_sets() {
     let scene = crate::small_scene(5);
     let range = crate::range_of(&scene);
     let camera = rangeimage::Camera::ABW0;
-    let out = rangeseg::segment(&range, &camera, &Config::default());
+    let mut no_gaps = Config::default();
+    no_gaps.pipeline.edge_gap_px = 0;
+    let out = rangeseg::segment(&range, &camera, &no_gaps);
     assert!(out.fin.edges().as_slice().iter().any(|&b| b), "the scene has several final regions");
-    // C holds exactly the region pixels with a 4-neighbour in another region, and the unlabelled
-    // pixels between two regions.
-    for (x, y, &l) in out.fin.labels.enumerate() {
-        let nb: Vec<u32> = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+    // Without the gap split, C holds exactly the region pixels with a 4-neighbour in another region, and the
+    // unlabelled pixels between two regions.
+    let labels = &out.fin.labels;
+    let neighbours = |x: u32, y: u32| {
+        [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
             .iter()
-            .filter_map(|&(dx, dy)| out.fin.labels.get_signed(i64::from(x) + dx, i64::from(y) + dy).copied())
-            .filter(|&m| m != 0)
-            .collect();
+            .filter_map(move |&(dx, dy)| labels.get_signed(i64::from(x) + dx, i64::from(y) + dy).copied())
+    };
+    for (x, y, &l) in labels.enumerate() {
+        let nb: Vec<u32> = neighbours(x, y).filter(|&m| m != 0).collect();
         let want = if l != 0 { nb.iter().any(|&m| m != l) } else { nb.iter().any(|&m| m != nb[0]) };
         assert_eq!(out.fin.edges()[(x, y)], want, "pixel ({x}, {y}), label {l}, neighbours {nb:?}");
     }
+    // With it (the default), the same labels, and C only gains pixels, each in or beside an unlabelled gap.
+    let split = rangeseg::segment(&range, &camera, &Config::default());
+    assert_eq!(&split.fin.labels, labels, "the gap split changes the edge map only");
+    let mut gained = 0;
+    for (x, y, &e) in split.fin.edges().enumerate() {
+        let before = out.fin.edges()[(x, y)];
+        assert!(e || !before, "pixel ({x}, {y}) left C");
+        if e && !before {
+            gained += 1;
+            let in_gap = labels[(x, y)] == 0 || neighbours(x, y).any(|m| m == 0);
+            assert!(in_gap, "pixel ({x}, {y}) joined C away from any gap");
+        }
+    }
+    assert!(gained > 0, "the final segmentation leaves gaps between regions here, and C closes them");
     let mut relaxed = Config::default();
     relaxed.pipeline.final_edges = rangeseg::FinalEdges::Relaxed;
     let out = rangeseg::pipeline::finish(&range, &camera, &relaxed, &out.features, &out.regions, &out.canny);

@@ -1,6 +1,6 @@
 //! Region boundaries of a label image, the one rule the final edge map and the evaluation share.
 
-use crate::{EdgeMap, LabelImage};
+use crate::{EdgeMap, Grid, LabelImage};
 
 /// Borders between regions: region pixels (`is_region(label)`) with a 4-neighbour in a different
 /// region. Both sides of a border are marked; region-to-non-region transitions are not borders.
@@ -20,6 +20,66 @@ pub fn label_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool) ->
     let mut out = EdgeMap::default();
     boundaries_into(labels, is_region, true, &mut out);
     out
+}
+
+/// `labels` into `out` with every valid unlabelled pixel (`valid` and label 0) that lies within `max_gap_px`
+/// 4-connected steps of a region, through such pixels, given to the nearest region: step by step, each such
+/// pixel takes the label its neighbours got in an earlier step, the first of up, left, right, down. The borders
+/// of `out` ([`label_boundaries`]) then run through the middle of the gaps a segmentation leaves between its
+/// regions, where they are narrower than `2 × max_gap_px + 1`. `gaps` is working memory, reserved once to the
+/// image's size.
+pub fn split_gaps_into(
+    labels: &LabelImage,
+    valid: &Grid<bool>,
+    max_gap_px: u32,
+    out: &mut LabelImage,
+    gaps: &mut Vec<u32>,
+) {
+    /// Marks a label given in the current step, which the step's other pixels must not see yet.
+    const FRESH: u32 = 1 << 31;
+    debug_assert!(labels.same_size(valid), "labels and valid mask differ in size");
+    out.copy_from(labels);
+    let (w, h) = (labels.width() as usize, labels.height() as usize);
+    let o = out.as_mut_slice();
+    gaps.clear();
+    if max_gap_px == 0 {
+        return;
+    }
+    gaps.reserve(w * h);
+    // Chunks without an unlabelled pixel are skipped by one branch-free test.
+    const CHUNK: usize = 32;
+    for (c, chunk) in o.chunks(CHUNK).enumerate() {
+        if chunk.iter().fold(false, |any, &l| any | (l == 0)) {
+            let start = c * CHUNK;
+            let v = &valid.as_slice()[start..start + chunk.len()];
+            let open = chunk.iter().zip(v).enumerate().filter(|&(_, (&l, &v))| l == 0 && v);
+            gaps.extend(open.map(|(i, _)| (start + i) as u32));
+        }
+    }
+    debug_assert!(o.iter().all(|&l| l < FRESH), "labels must stay below 2^31");
+    for _ in 0..max_gap_px {
+        for &j in gaps.iter() {
+            let j = j as usize;
+            let (x, y) = (j % w, j / w);
+            let settled = |i: usize| Some(o[i]).filter(|&l| l != 0 && l & FRESH == 0);
+            let up = if y > 0 { settled(j - w) } else { None };
+            let left = if x > 0 { settled(j - 1) } else { None };
+            let right = if x + 1 < w { settled(j + 1) } else { None };
+            let down = if y + 1 < h { settled(j + w) } else { None };
+            if let Some(l) = up.or(left).or(right).or(down) {
+                o[j] = l | FRESH;
+            }
+        }
+        let before = gaps.len();
+        gaps.retain(|&j| {
+            let l = &mut o[j as usize];
+            *l &= !FRESH;
+            *l == 0
+        });
+        if gaps.len() == before || gaps.is_empty() {
+            break;
+        }
+    }
 }
 
 /// [`label_boundaries`] into `out`, whose memory is reused.
@@ -173,5 +233,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn gaps_are_split_between_the_nearest_regions_up_to_the_limit() {
+        let row = |r: &[u32]| r.to_vec();
+        // Two regions 4 px apart, a 1-px gap on the right, and an invalid pixel that blocks the way.
+        let labels =
+            Grid::from_rows(vec![row(&[1, 0, 0, 0, 0, 2, 0, 3]), row(&[1, 0, 0, 0, 0, 2, 0, 3])]).unwrap();
+        let mut valid = Grid::new(8, 2, true);
+        valid[(3, 1)] = false;
+        let (mut out, mut gaps) = (LabelImage::default(), Vec::new());
+        split_gaps_into(&labels, &valid, 2, &mut out, &mut gaps);
+        assert_eq!(out.rows().next().unwrap().to_vec(), vec![1, 1, 1, 2, 2, 2, 2, 3]);
+        // Row 1: the invalid pixel stays unlabelled and the one beyond it is reached from 2 only.
+        assert_eq!(out.rows().nth(1).unwrap().to_vec(), vec![1, 1, 1, 0, 2, 2, 2, 3]);
+        // The border now runs through the gap: 1 | 2 between x = 2 and 3 on row 0.
+        let edges = label_boundaries(&out, |l| l != 0);
+        assert_eq!(
+            edges.rows().next().unwrap().to_vec(),
+            vec![false, false, true, true, false, false, true, true]
+        );
+        // One step reaches only the pixels next to a region; 0 steps change nothing.
+        split_gaps_into(&labels, &valid, 1, &mut out, &mut gaps);
+        assert_eq!(out.rows().next().unwrap().to_vec(), vec![1, 1, 0, 0, 2, 2, 2, 3]);
+        split_gaps_into(&labels, &valid, 0, &mut out, &mut gaps);
+        assert_eq!(out, labels);
     }
 }
