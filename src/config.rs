@@ -39,7 +39,8 @@ pub struct PipelineParams {
     /// What the final edge map C is.
     pub final_edges: FinalEdges,
     /// With `final_edges = segmentation`: valid unlabelled pixels within this many pixels of a region are given to the
-    /// nearest one before the borders are drawn ([`rangeimage::boundary::split_gaps_into`]; 0 = off).
+    /// nearest one, or to the one whose plane clearly fits them, before the borders are drawn
+    /// ([`finalseg::edge_labels_into`]; 0 = off).
     pub edge_gap_px: u32,
     /// Run pinhole images (and grid images of unusual noise) in working units of a fixed noise level ([`crate::units`]).
     pub normalize_units: bool,
@@ -295,7 +296,7 @@ const KEY_DOCS: &[(&str, &str)] = &[
     ),
     (
         "pipeline.edge_gap_px",
-        "Final edge map \"segmentation\": unlabelled pixels within this many pixels of a region go to the nearest one before the borders are drawn (0 = off).",
+        "Final edge map \"segmentation\": unlabelled pixels within this many pixels of a region go to the nearest one, or to the one whose plane clearly fits them, before the borders are drawn (0 = off).",
     ),
     (
         "pipeline.normalize_units",

@@ -117,7 +117,7 @@ struct Scratch {
     vcanny: vcanny::Scratch,
     relax: relax::Scratch,
     finalseg: finalseg::Scratch,
-    /// The final labels with their narrow gaps split ([`rangeimage::boundary::split_gaps_into`]), and its working list.
+    /// The labels the final edge map is drawn from ([`finalseg::edge_labels_into`]), and its working list.
     gaps: (LabelImage, Vec<u32>),
 }
 
@@ -328,17 +328,12 @@ fn finish_into(
         FinalEdges::Relaxed => fin.edges.copy_from(&fin.relaxed.edges),
         // The boundary rule eval scores segmentations by (region pixels next to another region, and
         // unlabelled pixels between two regions; a region's edge against unlabelled pixels is no border),
-        // drawn after the gaps of up to `edge_gap_px` on either side that the final segmentation leaves
-        // between regions (crease pixels, outliers) are split between them.
+        // drawn after the gaps the final segmentation leaves between regions are split between them.
         FinalEdges::Segmentation => {
             let (gap_labels, gaps) = &mut scratch.gaps;
-            rangeimage::boundary::split_gaps_into(
-                &fin.labels,
-                valid,
-                config.pipeline.edge_gap_px,
-                gap_labels,
-                gaps,
-            );
+            let gap_px = config.pipeline.edge_gap_px;
+            let (labels, regions) = (&fin.labels, &fin.final_regions);
+            finalseg::edge_labels_into((range, camera, valid), labels, regions, gap_px, gap_labels, gaps);
             rangeimage::boundary::label_boundaries_into(gap_labels, |l| l != 0, &mut fin.edges)
         }
     }

@@ -7,6 +7,7 @@ mod band;
 mod components;
 mod crease;
 mod curved;
+mod edges;
 mod fill;
 mod merge;
 mod outliers;
@@ -14,6 +15,7 @@ mod params;
 mod plane;
 mod refine;
 
+pub use edges::{PLANE_MARGIN, edge_labels_into};
 pub use params::{Mode, Params};
 
 use plane::{Plane, fit_plane};
