@@ -424,7 +424,7 @@ const KEY_DOCS: &[(&str, &str)] = &[
     ("relax.normalize", "Divide s1 and |∇| by their means over the initial sets (λ becomes unitless)."),
     (
         "relax.support_px",
-        "Relaxed C2 points farther than this from the pruned C1 leave the final edge map (pixels; 0 = keep all).",
+        "Relaxed C2 points farther than this from the pruned C1 leave the relaxed edge map C1 ∪ C2, the final one only with final_edges = \"relaxed\" (pixels; 0 = keep all).",
     ),
     ("segment", "The final segmentation from the relaxed edges (crate finalseg); distances in camera units."),
     (

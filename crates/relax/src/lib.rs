@@ -36,8 +36,8 @@
 //! points only, so a C2 point that is nobody's nearest neighbour feels no pull toward C1, and
 //! one-pixel moves within the schedule's few sweeps cannot carry a point several pixels anyway:
 //! after annealing, C2 points between `support_px` and `t_d_px` from C1 are still where Canny put
-//! them, mostly responses inside a face that C1 does not corroborate. So the final edge map keeps
-//! only the relaxed C2 points within `support_px` of C1 (`support_px = 0` keeps all of them, as
+//! them, mostly responses inside a face that C1 does not corroborate. So the relaxed edge map
+//! ([`Relaxed::edges`], the paper's final edge map) keeps only the relaxed C2 points within `support_px` of C1 (`support_px = 0` keeps all of them, as
 //! the paper). The reference is the pruned C1 as region growing placed it, not the relaxed C1,
 //! whose points annealing has jittered by a pixel or two (measured on the training split: higher
 //! boundary F and precision against C1 on every image than testing against the relaxed C1).
@@ -149,8 +149,9 @@ pub struct Relaxed {
     pub c1: EdgeMap,
     /// Pruned and relaxed Canny edges (the annealed state, before the final support test).
     pub c2: EdgeMap,
-    /// The final edge map C = C1 ∪ (the points of C2 within `support_px` of the pruned initial
-    /// C1; all of C2 if `support_px = 0`).
+    /// The relaxed edge map C = C1 ∪ (the points of C2 within `support_px` of the pruned initial
+    /// C1; all of C2 if `support_px = 0`): the paper's final edge map (the pipeline's with
+    /// `pipeline.final_edges = "relaxed"`).
     pub edges: EdgeMap,
 }
 
