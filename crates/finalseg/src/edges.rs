@@ -21,9 +21,12 @@ pub const PLANE_MARGIN: f64 = 3.0;
 /// draws them, into `out`: each valid unlabelled pixel within `gap_px` 4-connected steps of a region, through
 /// unlabelled pixels, goes to the nearest one ([`rangeimage::boundary::split_gaps_into`]); then each such pixel
 /// goes to the region among those the split put within `gap_px` pixels of it (a square window) whose plane explains
-/// it by [`PLANE_MARGIN`] better than the others there, if one does (every pixel decided on the split's labels, so
-/// the scan order does not matter). `range` and `camera` are those the segmentation ran in; `gaps` is working
-/// memory. `gap_px` 0 leaves `out` equal to `labels`.
+/// it by [`PLANE_MARGIN`] better than the others there, if one does. The pixels are decided one after the other in
+/// the order the split lists them, each on the labels the split and the earlier decisions left (deterministic; a
+/// decision can carry a plane's label on to the next pixel of a halo: measured against deciding every pixel on the
+/// split's labels alone, boundary F 0.9699 / 0.9239 / 0.1244 against 0.9695 / 0.9236 / 0.1241 on the synthetic,
+/// real ABW and NYU sets). `range` and `camera` are those the segmentation ran in; `gaps` is working memory.
+/// `gap_px` 0 leaves `out` equal to `labels`.
 pub fn edge_labels_into(
     (range, camera, valid): (&RangeImage, &Camera, &Grid<bool>),
     labels: &LabelImage,
@@ -33,8 +36,6 @@ pub fn edge_labels_into(
     gaps: &mut Vec<u32>,
 ) {
     rangeimage::boundary::split_gaps_into(labels, valid, gap_px, out, gaps);
-    /// Marks a label the plane test changed, which the other pixels' windows must not see.
-    const FRESH: u32 = 1 << 31;
     let reach = gap_px as usize;
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     let out = out.as_mut_slice();
@@ -50,14 +51,10 @@ pub fn edge_labels_into(
             let row = &out[wy * w + x0..=wy * w + x1];
             // Most rows of a window hold no label but the two already seen: one branch-free test skips them.
             let (b, n) = (best.1, next.1);
-            if row
-                .iter()
-                .fold(true, |known, &m| known & ((m & !FRESH == 0) | (m & !FRESH == b) | (m & !FRESH == n)))
-            {
+            if row.iter().fold(true, |known, &m| known & ((m == 0) | (m == b) | (m == n))) {
                 continue;
             }
             for &m in row {
-                let m = m & !FRESH;
                 if m == 0 || m == best.1 || m == next.1 {
                     continue;
                 }
@@ -76,11 +73,8 @@ pub fn edge_labels_into(
             }
         }
         if best.1 != 0 && out[i] != best.1 && next.0 - best.0 > PLANE_MARGIN * (best.2 + next.2) {
-            out[i] = best.1 | FRESH;
+            out[i] = best.1;
         }
-    }
-    for &i in gaps.iter() {
-        out[i as usize] &= !FRESH;
     }
 }
 
