@@ -27,7 +27,8 @@ pub fn label_boundaries(labels: &LabelImage, is_region: impl Fn(u32) -> bool) ->
 /// pixel takes the label its neighbours got in an earlier step, the first of up, left, right, down. The borders
 /// of `out` ([`label_boundaries`]) then run through the middle of the gaps a segmentation leaves between its
 /// regions, where they are narrower than `2 × max_gap_px + 1`. `gaps` ends with the pixels given a label (in no
-/// particular order); its memory is reserved once to the image's size.
+/// particular order); its memory is reserved once to the image's size. Labels must lie below 2³¹ (the top bit marks
+/// a step's new labels; checked in debug builds).
 pub fn split_gaps_into(
     labels: &LabelImage,
     valid: &Grid<bool>,
