@@ -1,6 +1,7 @@
 //! Divan benchmarks of the whole pipeline on one 512×512 image (from a file on disk to written outputs, and in
 //! memory), of the whole method in memory on the ABW-like 512² image and the 640×480 Kinect frame of `data/real`
-//! (depth → labels + planes), of the range image → C2 path, and of the features stage on frames with no-data.
+//! (depth → labels + planes; on the Kinect frame also decimated, as `configs/fast.toml` runs it), of the range image
+//! → C2 path, and of the features stage on frames with no-data.
 
 use rangeseg::Config;
 
@@ -76,6 +77,19 @@ fn depth_to_planes(b: divan::Bencher, name: &str) {
 fn stream_depth_to_planes(b: divan::Bencher, name: &str) {
     let (range, camera) = frame(name);
     let mut seg = rangeseg::pipeline::Segmenter::new(Config::default());
+    b.bench_local(|| {
+        let out = seg.segment(divan::black_box(&range), &camera);
+        rangeseg::planes(&range, &out.fin.labels, &camera)
+    });
+}
+
+/// [`stream_depth_to_planes`] on the Kinect frame with `pipeline.decimate = 2` (`configs/fast.toml`): the stages on
+/// 2 × 2 blocks, the labels carried back to every pixel.
+#[divan::bench(sample_count = 20)]
+fn stream_depth_to_planes_decimated(b: divan::Bencher) {
+    let (range, camera) = frame("tum-kinect");
+    let pipeline = rangeseg::PipelineParams { decimate: 2, ..Default::default() };
+    let mut seg = rangeseg::pipeline::Segmenter::new(Config { pipeline, ..Default::default() });
     b.bench_local(|| {
         let out = seg.segment(divan::black_box(&range), &camera);
         rangeseg::planes(&range, &out.fin.labels, &camera)

@@ -1,8 +1,9 @@
 //! Per-stage times of the pipeline on a stream of frames, as the eval report sees them, in wall-clock time and in
 //! time on the CPU (which leaves out the time other processes of a busy machine take the core).
 //!
-//! `cargo run --release --example stage_times -- FILE [N] [oneshot]`: segments FILE N times (default 30) on one
-//! thread, by default with one `Segmenter` for all frames (`oneshot`: `rangeseg::segment` per frame), and prints the
+//! `cargo run --release --example stage_times -- FILE [N] [oneshot] [CONFIG.toml]`: segments FILE N times (default
+//! 30) on one thread with the default configuration (or CONFIG.toml, e.g. `configs/fast.toml`), by default with one
+//! `Segmenter` for all frames (`oneshot`: `rangeseg::segment` per frame), and prints the
 //! fastest and median wall-clock time of each stage (`rangeseg::pipeline::StageTimings`), of the whole frame
 //! (depth → labels + planes) and the frame's time on the CPU (Linux: `/proc/thread-self/schedstat`).
 #![allow(clippy::print_stdout)]
@@ -18,11 +19,15 @@ fn cpu_ns() -> Option<f64> {
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
-    let path = args.next().context("usage: stage_times FILE [N] [oneshot]")?;
+    let path = args.next().context("usage: stage_times FILE [N] [oneshot] [CONFIG.toml]")?;
     let n: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(30);
-    let oneshot = args.next().as_deref() == Some("oneshot");
+    let rest: Vec<String> = args.collect();
+    let oneshot = rest.iter().any(|a| a == "oneshot");
     let frame = rangeio::read(std::path::Path::new(&path), &Default::default())?;
-    let config = rangeseg::Config::default();
+    let config = match rest.iter().find(|a| a.ends_with(".toml")) {
+        Some(c) => rangeseg::Config::load(std::path::Path::new(c))?,
+        None => rangeseg::Config::default(),
+    };
     let mut seg = rangeseg::pipeline::Segmenter::new(config.clone());
     let mut rows: Vec<[f64; 6]> = Vec::with_capacity(n);
     for _ in 0..n {

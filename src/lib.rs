@@ -3,6 +3,7 @@
 //! The facade crate: it re-exports the pipeline stages and holds the configuration that ties them.
 
 pub mod config;
+pub mod decimate;
 pub mod dequantise;
 pub mod evaluate;
 pub mod output;

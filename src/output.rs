@@ -186,6 +186,7 @@ pub fn write_selected_outputs(
         "width": frame.range.width(),
         "height": frame.range.height(),
         "dequantised_step": out.dequantised,
+        "decimation": out.decimation,
         "regions_grown": out.regions.regions.len(),
         "regions_final": out.fin.final_regions.len(),
         "regions_written": cap.map(|c| c.0),

@@ -45,6 +45,10 @@ pub struct Output {
     /// `features` and the regions' planes then describe the dequantised depth (`rangeseg::planes` fits the input
     /// as given).
     pub dequantised: Option<f64>,
+    /// The decimation the stages ran at (`pipeline.decimate`, or 1 where the camera has no decimated twin; see
+    /// [`crate::decimate`]). Above 1, `features` and `canny.magnitude` are maps of the decimated frame, the planes
+    /// were fitted on it, and `units.camera` sees the full frame; every label and edge map has the frame's size.
+    pub decimation: u32,
 }
 
 /// What the last stage produces: relaxed edges and the final segmentation.
@@ -99,6 +103,8 @@ pub struct Segmenter {
     config: Config,
     out: Output,
     scratch: Scratch,
+    /// Whether it has warned that a frame could not be decimated (once per segmenter).
+    warned: bool,
 }
 
 /// The working buffers of every stage, and the pipeline's own per-pixel maps.
@@ -119,6 +125,105 @@ struct Scratch {
     finalseg: finalseg::Scratch,
     /// The labels the final edge map is drawn from ([`finalseg::edge_labels_into`]), and its working list.
     gaps: (LabelImage, Vec<u32>),
+    /// The decimated frame and the maps carried back to full resolution ([`crate::decimate`]).
+    decimated: Decimated,
+}
+
+/// The buffers of a decimated frame ([`crate::decimate`]).
+#[derive(Debug, Default)]
+struct Decimated {
+    /// The frame decimated.
+    range: RangeImage,
+    /// The full frame in working units (when they are not its own) and its valid mask.
+    work: RangeImage,
+    valid: Grid<bool>,
+    /// A label map and an edge map at full resolution, swapped with the output's.
+    labels: LabelImage,
+    edges: EdgeMap,
+    /// [`crate::decimate::renumber`]'s working memory.
+    map: Vec<u32>,
+}
+
+/// Frames decimated to fewer blocks than this on a side run at full resolution.
+pub const MIN_DECIMATED_SIDE: u32 = 16;
+
+/// The full frame a decimated one came from.
+struct Full<'a> {
+    range: &'a RangeImage,
+    /// The decimation.
+    factor: u32,
+    /// The time the decimation took (ms).
+    t_down: f64,
+}
+
+/// Makes room in `grid` for `px` values (its contents stay).
+fn keep_room<T: Default>(grid: &mut Grid<T>, px: usize) {
+    let (w, h) = grid.dimensions();
+    let mut v = std::mem::take(grid).into_vec();
+    v.reserve(px.saturating_sub(v.len()));
+    *grid = Grid::from_vec(w, h, v).expect("the same values");
+}
+
+/// Carries the results of a frame decimated by `f` back to `full`, the frame (module docs of [`crate::decimate`]):
+/// the final labels by their regions' planes, seen in working units through `units.camera` (the full frame's), and
+/// the final edge map drawn from them; region growing's labels, C1 (their borders), C2 and the relaxed edge sets
+/// by nearest neighbour. The features and the gradient magnitude stay at the decimated size.
+fn upsample(
+    full: &RangeImage,
+    f: u32,
+    config: &Config,
+    units: &WorkingUnits,
+    out: &mut Output,
+    scratch: &mut Scratch,
+) {
+    use crate::decimate::{Limit, labels_into, nearest_into, renumber};
+    let size = full.dimensions();
+    let s = &mut scratch.decimated;
+    let work = if units.is_identity() {
+        full
+    } else {
+        units.scale_into(full, &mut s.work);
+        &s.work
+    };
+    s.valid.map_from(work, |v| v.is_finite());
+    let geometry = (work, &units.camera, &s.valid);
+    let seg = &config.segment;
+    let limit =
+        Limit { max_residual: seg.fill_max_residual, rms_ratio: seg.fill_rms_ratio, factor: f64::from(f) };
+    let fin = &mut out.fin;
+    let px = full.len();
+    // Each map at full size is swapped into the output; the stage's map swapped out gets room for a full one, so
+    // that the next frame allocates nothing.
+    labels_into(geometry, &fin.labels, &fin.final_regions, f, limit, &mut s.labels);
+    std::mem::swap(&mut fin.labels, &mut s.labels);
+    keep_room(&mut s.labels, px);
+    renumber(&mut fin.labels, &mut fin.final_regions, &mut s.map);
+
+    nearest_into(&out.regions.labels, f, size, &mut s.labels);
+    std::mem::swap(&mut out.regions.labels, &mut s.labels);
+    keep_room(&mut s.labels, px);
+    // Nearest neighbour keeps the raster order of the regions' first pixels: only their sizes change.
+    for r in &mut out.regions.regions {
+        r.size_px = 0;
+    }
+    for &l in out.regions.labels.as_slice().iter().filter(|&&l| l != 0) {
+        out.regions.regions[l as usize - 1].size_px += 1;
+    }
+    regiongrow::borders_into(&out.regions.labels, config.regiongrow.c1_one_sided, &mut out.regions.c1);
+    for map in [&mut out.canny.edges, &mut fin.relaxed.c1, &mut fin.relaxed.c2, &mut fin.relaxed.edges] {
+        nearest_into(map, f, size, &mut s.edges);
+        std::mem::swap(map, &mut s.edges);
+        keep_room(&mut s.edges, px);
+    }
+    match config.pipeline.final_edges {
+        FinalEdges::Relaxed => fin.edges.copy_from(&fin.relaxed.edges),
+        FinalEdges::Segmentation => {
+            let (gap_labels, gaps) = &mut scratch.gaps;
+            let gap_px = config.pipeline.edge_gap_px;
+            finalseg::edge_labels_into(geometry, &fin.labels, &fin.final_regions, gap_px, gap_labels, gaps);
+            rangeimage::boundary::label_boundaries_into(gap_labels, |l| l != 0, &mut fin.edges)
+        }
+    }
 }
 
 impl Segmenter {
@@ -139,7 +244,37 @@ impl Segmenter {
     /// Segments one frame; the result lives until the next call (see [`Segmenter::into_output`]).
     pub fn segment(&mut self, range: &RangeImage, camera: &Camera) -> &Output {
         let _s = tracing::info_span!("segment", w = range.width(), h = range.height()).entered();
-        let Self { config, out, scratch } = self;
+        let f = self.config.pipeline.decimate;
+        let (w2, h2) = crate::decimate::size(range, f);
+        let coarse =
+            (f > 1 && w2.min(h2) >= MIN_DECIMATED_SIDE).then(|| crate::decimate::camera(camera, f)).flatten();
+        match coarse {
+            Some(coarse_camera) => {
+                let t = Instant::now();
+                let mut small = std::mem::take(&mut self.scratch.decimated.range);
+                crate::decimate::downsample_into(range, f, &mut small);
+                let t_down = elapsed_ms(t);
+                self.run(&small, &coarse_camera, Some(Full { range, factor: f, t_down }));
+                self.scratch.decimated.range = small;
+            }
+            None => {
+                if f > 1 && !std::mem::replace(&mut self.warned, true) {
+                    tracing::warn!(
+                        decimate = f,
+                        "pipeline.decimate needs a pinhole camera and a frame of {MIN_DECIMATED_SIDE} blocks a side: \
+                         this frame (and any other such) runs at full resolution"
+                    );
+                }
+                self.run(range, camera, None);
+            }
+        }
+        &self.out
+    }
+
+    /// The stages on `range` seen through `camera`: the frame itself, or its decimation with the `full` frame it came
+    /// from, to which the results are carried back ([`crate::decimate`]).
+    fn run(&mut self, range: &RangeImage, camera: &Camera, full: Option<Full<'_>>) {
+        let Self { config, out, scratch, .. } = self;
         let t = Instant::now();
         // A staircase (depth rounded to steps above its noise) runs dequantised, in working units of its own;
         // other images reuse the σ the test read.
@@ -185,8 +320,18 @@ impl Segmenter {
         let t_canny = elapsed_ms(t);
 
         let t = Instant::now();
-        finish_into(range, camera, config, (&out.features, &out.regions, &out.canny), scratch, &mut out.fin);
-        let t_relax = elapsed_ms(t);
+        // A decimated frame's final edge map is drawn at full resolution (`upsample`).
+        let inputs = (&out.features, &out.regions, &out.canny);
+        finish_into(range, camera, config, inputs, scratch, (&mut out.fin, full.is_none()));
+        let (mut units, mut t_features, mut t_relax) = (units, t_features, elapsed_ms(t));
+        out.decimation = 1;
+        if let Some(full) = full {
+            let t = Instant::now();
+            units.camera = crate::decimate::full_camera(&units.camera, full.factor);
+            upsample(full.range, full.factor, config, &units, out, scratch);
+            out.decimation = full.factor;
+            (t_features, t_relax) = (t_features + full.t_down, t_relax + elapsed_ms(t));
+        }
 
         out.timings =
             StageTimings { features: t_features, regiongrow: t_regions, vcanny: t_canny, relax: t_relax };
@@ -199,7 +344,6 @@ impl Segmenter {
         if let Some(d) = dequantised {
             scratch.dequantise.recycle(d);
         }
-        &self.out
     }
 
     /// The output of the last frame (empty before the first frame).
@@ -281,18 +425,19 @@ pub fn finish(
     check(config, "finish");
     let mut fin = Finish::default();
     let mut scratch = Scratch { valid: rangeimage::valid_mask(range), ..Scratch::default() };
-    finish_into(range, camera, config, (features, regions, canny), &mut scratch, &mut fin);
+    finish_into(range, camera, config, (features, regions, canny), &mut scratch, (&mut fin, true));
     fin
 }
 
-/// [`finish`] into `fin` with the buffers of `scratch`, whose `valid` holds the valid mask of `range`.
+/// [`finish`] into `fin` with the buffers of `scratch`, whose `valid` holds the valid mask of `range`; the final edge
+/// map `fin.edges` only if `edges` (else it is left as it was).
 fn finish_into(
     range: &RangeImage,
     camera: &Camera,
     config: &Config,
     (features, regions, canny): (&SurfaceFeatures, &regiongrow::Segmentation, &vcanny::Edges),
     scratch: &mut Scratch,
-    fin: &mut Finish,
+    (fin, edges): (&mut Finish, bool),
 ) {
     let valid = &scratch.valid;
     if config.pipeline.relax {
@@ -324,6 +469,9 @@ fn finish_into(
         &mut scratch.finalseg,
         (&mut fin.labels, &mut fin.final_regions),
     );
+    if !edges {
+        return;
+    }
     match config.pipeline.final_edges {
         FinalEdges::Relaxed => fin.edges.copy_from(&fin.relaxed.edges),
         // The boundary rule eval scores segmentations by (region pixels next to another region, and

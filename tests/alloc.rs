@@ -174,20 +174,34 @@ fn the_paper_configuration_too() {
     stream(&abw_frames(2), &Camera::ABW0, &config);
 }
 
-#[test]
-fn a_stream_of_kinect_frames_too() {
-    let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+/// The TUM Kinect frame of `data/real` and a second one, the same scene with a band of no data, with their camera.
+fn kinect_frames() -> ([RangeImage; 2], Camera) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("data/real/open3d-testdata/RGBD/other_formats/TUM_depth.png");
     let frame = rangeio::read(&path, &Default::default()).expect("read the TUM frame");
-    // A second frame: the same scene with a band of no data.
     let mut other = frame.range.clone();
     for y in 100..140 {
         for x in 0..other.width() {
             other[(x, y)] = f32::NAN;
         }
     }
-    stream(&[frame.range, other], &frame.camera, &Config::default());
+    ([frame.range, other], frame.camera)
+}
+
+#[test]
+fn a_stream_of_kinect_frames_too() {
+    let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let (frames, camera) = kinect_frames();
+    stream(&frames, &camera, &Config::default());
+}
+
+#[test]
+fn decimated_kinect_frames_too() {
+    // Stages on 2 × 2 blocks, the maps carried back to full size: still nothing image-sized after the first frame.
+    let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let (frames, camera) = kinect_frames();
+    let pipeline = rangeseg::PipelineParams { decimate: 2, ..Default::default() };
+    stream(&frames, &camera, &Config { pipeline, ..Default::default() });
 }
 
 /// The stages before the final segmentation, each with its own buffers, as `Segmenter` chains them.

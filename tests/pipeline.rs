@@ -382,3 +382,75 @@ fn rendered_disparity_is_segmented_into_its_planes() {
     }
     assert!(f64::from(correct) >= 0.85 * f64::from(total), "{correct} of {total} GT regions correct");
 }
+
+/// The pixels whose label in `b` is not the one that `a`'s label there mostly became in `b` (labels compared up to
+/// their numbers).
+fn relabelled(a: &rangeimage::LabelImage, b: &rangeimage::LabelImage) -> usize {
+    let mut overlap = std::collections::BTreeMap::new();
+    for (&x, &y) in a.as_slice().iter().zip(b.as_slice()) {
+        *overlap.entry((x, y)).or_insert(0usize) += 1;
+    }
+    // Per label of `a`: the label of `b` it overlaps most (the smallest of equals, as the map is ordered).
+    let mut became = std::collections::BTreeMap::new();
+    for (&(x, y), &n) in &overlap {
+        let e = became.entry(x).or_insert((0, y));
+        if n > e.0 {
+            *e = (n, y);
+        }
+    }
+    a.as_slice().iter().zip(b.as_slice()).filter(|&(x, y)| became[x].1 != *y).count()
+}
+
+/// The default configuration with `pipeline.decimate = f`.
+fn decimated(f: u32) -> Config {
+    Config { pipeline: rangeseg::PipelineParams { decimate: f, ..Default::default() }, ..Default::default() }
+}
+
+#[test]
+fn a_decimated_frame_comes_back_at_full_size_with_its_planes() {
+    // The hall, run on 2 × 2 and 3 × 3 blocks: every map has the frame's size, the five planes are correct at full
+    // resolution, and no more than 1 % of the hall's pixels are labelled otherwise than at full resolution.
+    let (range, camera, gt) = hall_gt();
+    let full = rangeseg::segment(&range, &camera, &Config::default());
+    for f in [2, 3] {
+        let out = rangeseg::segment(&range, &camera, &decimated(f));
+        assert_eq!(out.decimation, f);
+        let maps = [out.fin.edges.dimensions(), out.regions.c1.dimensions(), out.canny.edges.dimensions()];
+        let sizes = [out.fin.labels.dimensions(), out.regions.labels.dimensions()].into_iter().chain(maps);
+        assert!(sizes.into_iter().all(|d| d == range.dimensions()), "f {f}: every map at the frame's size");
+        assert_eq!(out.features.k.dimensions(), (640 / f, 480 / f), "the features stay decimated");
+        let h = rangeseg::evaluate::hoover(&gt, &out.fin.labels, &out.fin.final_regions, &[]);
+        assert_eq!((h.correct, h.gt_regions), (5, 5), "f {f}: {h:?}");
+        assert_planes_of_5000_px(&range, &out, &camera, 5, 0.001);
+        // Compared up to their numbers, the labels are those of full resolution but at a few pixels.
+        let differ = relabelled(&full.fin.labels, &out.fin.labels);
+        assert!(differ * 100 < range.len(), "f {f}: {differ} pixels labelled otherwise");
+        // The sizes are counted at full resolution; the labels are numbered in raster order of their first pixels.
+        for r in &out.fin.final_regions {
+            let n = out.fin.labels.as_slice().iter().filter(|&&l| l == r.label).count();
+            assert_eq!(n, r.size_px as usize);
+        }
+        let mut firsts = Vec::new();
+        for &l in out.fin.labels.as_slice().iter().filter(|&&l| l != 0) {
+            if !firsts.contains(&l) {
+                firsts.push(l);
+            }
+        }
+        assert!(firsts.iter().enumerate().all(|(k, &l)| l == k as u32 + 1), "{firsts:?}");
+    }
+}
+
+#[test]
+fn frames_without_a_pinhole_camera_run_at_full_resolution() {
+    // An ABW image and a grid image have no decimated camera: the same output as without decimation.
+    let abw = crate::range_of(&scenegen::generate(&scenegen::benchmark_image(false, 0).0, 1));
+    let (depth, _) = hall();
+    let grid = depth.map(|&z| 52.5 / z);
+    for (range, camera) in [(&abw, rangeimage::Camera::ABW0), (&grid, rangeimage::Camera::Grid)] {
+        let a = rangeseg::segment(range, &camera, &Config::default());
+        let b = rangeseg::segment(range, &camera, &decimated(2));
+        assert_eq!((a.decimation, b.decimation), (1, 1));
+        assert_eq!(a.fin.labels, b.fin.labels);
+        assert_eq!(a.fin.edges, b.fin.edges);
+    }
+}
