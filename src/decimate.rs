@@ -108,11 +108,27 @@ pub fn nearest_into<T: Copy + Default>(coarse: &Grid<T>, f: u32, (w, h): (u32, u
         // Each block's value f times, then the last block's to the end of the row.
         let start = data.len();
         data.resize(start + w, row[cw - 1]);
-        for (run, &v) in data[start..].chunks_exact_mut(f).zip(row) {
-            run.fill(v);
+        let blocks = &mut data[start..start + cw * f];
+        match f {
+            2 => expand::<T, 2>(row, blocks),
+            3 => expand::<T, 3>(row, blocks),
+            4 => expand::<T, 4>(row, blocks),
+            _ => {
+                for (run, &v) in blocks.chunks_exact_mut(f).zip(row) {
+                    run.fill(v);
+                }
+            }
         }
     }
     *out = Grid::from_vec(w as u32, h, data).expect("one value per pixel");
+}
+
+/// Each value of `row` `F` times into `out` (`F` values of `out` per value of `row`).
+#[inline(always)]
+fn expand<T: Copy, const F: usize>(row: &[T], out: &mut [T]) {
+    for (run, &v) in out.chunks_exact_mut(F).zip(row) {
+        run.copy_from_slice(&[v; F]);
+    }
 }
 
 /// The limits [`labels_into`] accepts a pixel within: `factor × max(max_residual, rms_ratio × RMS)` of a region's
@@ -148,7 +164,7 @@ pub fn labels_into(
     let f = f.max(1) as usize;
     let c = coarse.as_slice();
     // Per region: its plane and the farthest distance it accepts.
-    let planes: Vec<([f64; 3], f64, f64)> = regions
+    let planes: Vec<PlaneReach> = regions
         .iter()
         .map(|r| {
             let reach = limit.factor * limit.max_residual.max(limit.rms_ratio * f64::from(r.rms_residual));
@@ -161,7 +177,7 @@ pub fn labels_into(
     let (vals, ok) = (range.as_slice(), valid.as_slice());
     // Per block of a block row: the distinct labels of the 3 × 3 blocks around it (`n` of them), found once for the
     // f rows of pixels the block row holds.
-    let mut around = vec![([0u32; 9], 0usize); cw];
+    let mut around: Vec<Around> = vec![([0; 9], 0); cw];
     // The 3D points of a row (meaningless at invalid pixels, which are skipped), or per region the terms of its
     // distance along the row.
     let mut points = vec![[0.0; 3]; w];
@@ -184,47 +200,75 @@ pub fn labels_into(
                 }
             }
         }
-        // Per region: the distance of a point of this row at column x and depth z from its plane, `|z·(a·x + b) +
-        // offset|`, for a pinhole (no division per pixel); other cameras go through their points.
-        let pinhole = match *camera {
+        let (row_vals, row_ok, row_out) = (&vals[y * w..][..w], &ok[y * w..][..w], &mut data[y * w..][..w]);
+        let row = (&around[..], row_ok, row_out, &planes[..], f);
+        match *camera {
+            // Per region: the distance of a point of this row at column x and depth z from its plane is
+            // `|z·(a·x + b) + offset|` (no division per pixel).
             Camera::Pinhole { fx, fy, cx, cy, depth_scale } => {
-                for (row, &(n, offset, _)) in rows_of.iter_mut().zip(&planes) {
+                for (terms, &(n, offset, _)) in rows_of.iter_mut().zip(&planes) {
                     let b = n[1] * (y as f64 - cy) / fy + n[2] - n[0] * cx / fx;
-                    *row = (n[0] / fx, b, offset);
+                    *terms = (n[0] / fx, b, offset);
                 }
-                Some(depth_scale)
+                label_row(row, |l, x| {
+                    let (a, b, offset) = rows_of[l];
+                    (f64::from(row_vals[x]) * depth_scale * (a * x as f64 + b) + offset).abs()
+                });
             }
             Camera::Abw(_) | Camera::Grid => {
-                camera.row_points(y as u32, &vals[y * w..][..w], &mut points);
-                None
-            }
-        };
-        let (row_vals, row_ok, row_out) = (&vals[y * w..][..w], &ok[y * w..][..w], &mut data[y * w..][..w]);
-        for (bx, (seen, n)) in around.iter().enumerate() {
-            // The block's pixels of the row (the last block's run to the end of the row).
-            let (x0, x1) = (bx * f, if bx + 1 == cw { w } else { (bx + 1) * f });
-            for x in (x0..x1).filter(|&x| row_ok[x]) {
-                let mut best = (f64::INFINITY, 0);
-                for &l in &seen[..*n] {
-                    let d = match pinhole {
-                        Some(scale) => {
-                            let (a, b, offset) = rows_of[l as usize - 1];
-                            (f64::from(row_vals[x]) * scale * (a * x as f64 + b) + offset).abs()
-                        }
-                        None => {
-                            let (normal, offset, _) = planes[l as usize - 1];
-                            (planefit::dot(normal, points[x]) + offset).abs()
-                        }
-                    };
-                    if d <= planes[l as usize - 1].2 && d < best.0 {
-                        best = (d, l);
-                    }
-                }
-                row_out[x] = best.1;
+                camera.row_points(y as u32, row_vals, &mut points);
+                label_row(row, |l, x| {
+                    let (normal, offset, _) = planes[l];
+                    (planefit::dot(normal, points[x]) + offset).abs()
+                });
             }
         }
     }
     *out = LabelImage::from_vec(range.width(), range.height(), data).expect("one label per pixel");
+}
+
+/// The distinct labels of the 3 × 3 blocks around a block (the first `n` of the array), and `n`.
+type Around = ([u32; 9], usize);
+
+/// A region's plane as [`labels_into`] tests it: its normal, its offset and the farthest distance it accepts.
+type PlaneReach = ([f64; 3], f64, f64);
+
+/// One row of [`labels_into`]: each valid pixel (`ok`) of the row gets, among the labels `around` its block (`f`
+/// pixels a block, the last block to the end of the row), the one whose plane (`planes[l − 1]`: normal, offset,
+/// reach) lies nearest by `distance(l − 1, x)`, if within its reach; else 0.
+#[inline(always)]
+fn label_row(
+    (around, ok, out, planes, f): (&[Around], &[bool], &mut [u32], &[PlaneReach], usize),
+    distance: impl Fn(usize, usize) -> f64,
+) {
+    let w = out.len();
+    for (bx, (seen, n)) in around.iter().enumerate() {
+        let x1 = if bx + 1 == around.len() { w } else { (bx + 1) * f };
+        match &seen[..*n] {
+            [] => {}
+            // Most blocks: one region around.
+            &[l] => {
+                let (k, reach) = (l as usize - 1, planes[l as usize - 1].2);
+                for x in bx * f..x1 {
+                    if ok[x] && distance(k, x) <= reach {
+                        out[x] = l;
+                    }
+                }
+            }
+            labels => {
+                for x in (bx * f..x1).filter(|&x| ok[x]) {
+                    let mut best = (f64::INFINITY, 0);
+                    for &l in labels {
+                        let d = distance(l as usize - 1, x);
+                        if d <= planes[l as usize - 1].2 && d < best.0 {
+                            best = (d, l);
+                        }
+                    }
+                    out[x] = best.1;
+                }
+            }
+        }
+    }
 }
 
 /// Renumbers `labels` (0 = none; `regions[l − 1]` the region of label `l`) 1, 2, … in raster order of each label's
