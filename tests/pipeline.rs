@@ -441,12 +441,33 @@ fn a_decimated_frame_comes_back_at_full_size_with_its_planes() {
 }
 
 #[test]
+fn frames_of_odd_sizes_come_back_whole() {
+    // The hall cropped to 637 × 479: the last column and row join no 2 × 2 block and take the nearest block's
+    // labels where its plane explains them.
+    let (range, camera, gt) = hall_gt();
+    let crop = |g: &rangeimage::LabelImage| rangeimage::Grid::from_fn(637, 479, |x, y| g[(x, y)]);
+    let range = rangeimage::Grid::from_fn(637, 479, |x, y| range[(x, y)]);
+    let out = rangeseg::segment(&range, &camera, &decimated(2));
+    assert_eq!(
+        (out.decimation, out.fin.labels.dimensions(), out.fin.edges.dimensions()),
+        (2, (637, 479), (637, 479))
+    );
+    let h = rangeseg::evaluate::hoover(&crop(&gt), &out.fin.labels, &out.fin.final_regions, &[]);
+    assert_eq!((h.correct, h.gt_regions), (5, 5), "{h:?}");
+    let last_column_labelled = (0..479).filter(|&y| out.fin.labels[(636, y)] != 0).count();
+    assert!(last_column_labelled > 400, "{last_column_labelled} of 479 pixels of the last column labelled");
+}
+
+#[test]
 fn frames_without_a_pinhole_camera_run_at_full_resolution() {
-    // An ABW image and a grid image have no decimated camera: the same output as without decimation.
+    // An ABW image and a grid image have no decimated camera, and a pinhole frame of 30 × 30 pixels is under 16
+    // blocks a side: the same output as without decimation.
     let abw = crate::range_of(&scenegen::generate(&scenegen::benchmark_image(false, 0).0, 1));
-    let (depth, _) = hall();
+    let (depth, camera) = hall();
     let grid = depth.map(|&z| 52.5 / z);
-    for (range, camera) in [(&abw, rangeimage::Camera::ABW0), (&grid, rangeimage::Camera::Grid)] {
+    let small = rangeimage::Grid::from_fn(30, 30, |x, y| depth[(300 + x, 200 + y)]);
+    let frames = [(&abw, rangeimage::Camera::ABW0), (&grid, rangeimage::Camera::Grid), (&small, camera)];
+    for (range, camera) in frames {
         let a = rangeseg::segment(range, &camera, &Config::default());
         let b = rangeseg::segment(range, &camera, &decimated(2));
         assert_eq!((a.decimation, b.decimation), (1, 1));
