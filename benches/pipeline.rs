@@ -83,12 +83,12 @@ fn stream_depth_to_planes(b: divan::Bencher, name: &str) {
     });
 }
 
-/// [`stream_depth_to_planes`] on the Kinect frame with `pipeline.decimate = 2` (`configs/fast.toml`): the stages on
-/// 2 × 2 blocks, the labels carried back to every pixel.
-#[divan::bench(sample_count = 20)]
-fn stream_depth_to_planes_decimated(b: divan::Bencher) {
+/// [`stream_depth_to_planes`] on the Kinect frame with `pipeline.decimate` = 2 or 3 (`configs/fast.toml` sets 3): the
+/// stages on f × f blocks, the labels carried back to every pixel.
+#[divan::bench(args = [2, 3], sample_count = 20)]
+fn stream_depth_to_planes_decimated(b: divan::Bencher, decimate: u32) {
     let (range, camera) = frame("tum-kinect");
-    let pipeline = rangeseg::PipelineParams { decimate: 2, ..Default::default() };
+    let pipeline = rangeseg::PipelineParams { decimate, ..Default::default() };
     let mut seg = rangeseg::pipeline::Segmenter::new(Config { pipeline, ..Default::default() });
     b.bench_local(|| {
         let out = seg.segment(divan::black_box(&range), &camera);
