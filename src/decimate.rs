@@ -3,8 +3,9 @@
 //!
 //! A depth camera's frame holds more pixels than its planes need. Averaged over 2 × 2 blocks, a 640 × 480 Kinect
 //! frame keeps the surfaces of a room, with less noise, in a quarter of the pixels; the whole method then takes 40 %
-//! of its time (docs/speed.md). Small faces (a few hundred pixels) go: the option is for real-time use, not for the
-//! ABW benchmark, and it is off by default (docs/method.md §2.7).
+//! of its time, and about a fifth over 3 × 3 blocks (`configs/fast.toml`; docs/speed.md). Faces under the smallest
+//! region go (200 blocks: 800 pixels at f = 2, 1,800 at f = 3): the option is for real-time use, not for the ABW
+//! benchmark, and it is off by default (docs/method.md §2.7).
 //!
 //! - **Camera.** A block's mean is the depth at the block's centre, pixel `f·i + (f − 1)/2` of the frame, which a
 //!   pinhole of focal lengths `f` times shorter and principal point `(c − (f − 1)/2) / f` sees at the block's
