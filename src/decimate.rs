@@ -77,15 +77,38 @@ pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
     for by in 0..h2 as usize {
         sums.fill((0.0, 0));
         for row in v[by * f * w..(by + 1) * f * w].chunks_exact(w) {
-            for (s, block) in sums.iter_mut().zip(row.chunks_exact(f)) {
-                for &x in block.iter().filter(|x| x.is_finite()) {
-                    *s = (s.0 + f64::from(x), s.1 + 1);
+            match f {
+                2 => add_blocks::<2>(row, &mut sums),
+                3 => add_blocks::<3>(row, &mut sums),
+                4 => add_blocks::<4>(row, &mut sums),
+                _ => {
+                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(f)) {
+                        add_block(block, s);
+                    }
                 }
             }
         }
         data.extend(sums.iter().map(|&(s, n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN }));
     }
     *out = RangeImage::from_vec(w2, h2, data).expect("one value per block");
+}
+
+/// Adds each block of `F` values of `row` to its sum and count in `sums` (valid values only, left to right).
+#[inline(always)]
+fn add_blocks<const F: usize>(row: &[f32], sums: &mut [(f64, u32)]) {
+    for (s, block) in sums.iter_mut().zip(row.chunks_exact(F)) {
+        add_block(block, s);
+    }
+}
+
+/// Adds the valid values of `block` to `s`, a sum and a count, left to right.
+#[inline(always)]
+fn add_block(block: &[f32], s: &mut (f64, u32)) {
+    for &x in block {
+        if x.is_finite() {
+            *s = (s.0 + f64::from(x), s.1 + 1);
+        }
+    }
 }
 
 /// `coarse` (a map of the frame decimated by `f`) back at the frame's size `(w, h)` into `out`: each pixel takes
@@ -280,17 +303,22 @@ pub fn renumber(labels: &mut LabelImage, regions: &mut Vec<Region>, map: &mut Ve
     map.resize(regions.len() + 1, 0);
     let mut sizes = vec![0u32; regions.len() + 1];
     let mut order = Vec::with_capacity(regions.len());
-    for l in labels.as_mut_slice() {
-        if *l == 0 {
+    // Run by run of one label (most rows are a few long runs).
+    let mut rest = labels.as_mut_slice();
+    while let Some(&first) = rest.first() {
+        let n = rest.iter().position(|&l| l != first).unwrap_or(rest.len());
+        let (run, tail) = rest.split_at_mut(n);
+        rest = tail;
+        if first == 0 {
             continue;
         }
-        let old = *l as usize;
+        let old = first as usize;
         if map[old] == 0 {
             order.push(old);
             map[old] = order.len() as u32;
         }
-        *l = map[old];
-        sizes[old] += 1;
+        run.fill(map[old]);
+        sizes[old] += n as u32;
     }
     let mut kept: Vec<Region> = order
         .iter()
