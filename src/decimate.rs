@@ -266,20 +266,23 @@ fn label_row(
     distance: impl Fn(usize, usize) -> f64,
 ) {
     let w = out.len();
-    for (bx, (seen, n)) in around.iter().enumerate() {
-        let x1 = if bx + 1 == around.len() { w } else { (bx + 1) * f };
+    let mut bx = 0;
+    while bx < around.len() {
+        let (seen, n) = &around[bx];
         match &seen[..*n] {
-            [] => {}
-            // Most blocks: one region around.
+            [] => bx += 1,
+            // Most blocks: one region around, the same for a run of blocks; tested without a branch per pixel.
             &[l] => {
+                let run = around[bx..].iter().take_while(|(s, n)| *n == 1 && s[0] == l).count();
+                let x1 = if bx + run == around.len() { w } else { (bx + run) * f };
                 let (k, reach) = (l as usize - 1, planes[l as usize - 1].2);
                 for x in bx * f..x1 {
-                    if ok[x] && distance(k, x) <= reach {
-                        out[x] = l;
-                    }
+                    out[x] = if ok[x] & (distance(k, x) <= reach) { l } else { 0 };
                 }
+                bx += run;
             }
             labels => {
+                let x1 = if bx + 1 == around.len() { w } else { (bx + 1) * f };
                 for x in (bx * f..x1).filter(|&x| ok[x]) {
                     let mut best = (f64::INFINITY, 0);
                     for &l in labels {
@@ -290,6 +293,7 @@ fn label_row(
                     }
                     out[x] = best.1;
                 }
+                bx += 1;
             }
         }
     }
