@@ -197,11 +197,14 @@ fn a_stream_of_kinect_frames_too() {
 
 #[test]
 fn decimated_kinect_frames_too() {
-    // Stages on 2 × 2 blocks, the maps carried back to full size: still nothing image-sized after the first frame.
+    // Stages on 2 × 2 and 3 × 3 blocks (`configs/fast.toml`), the maps carried back to full size: still nothing
+    // image-sized after the first frame.
     let _g = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let (frames, camera) = kinect_frames();
-    let pipeline = rangeseg::PipelineParams { decimate: 2, ..Default::default() };
-    stream(&frames, &camera, &Config { pipeline, ..Default::default() });
+    for decimate in [2, 3] {
+        let pipeline = rangeseg::PipelineParams { decimate, ..Default::default() };
+        stream(&frames, &camera, &Config { pipeline, ..Default::default() });
+    }
 }
 
 /// The stages before the final segmentation, each with its own buffers, as `Segmenter` chains them.
