@@ -150,6 +150,7 @@ impl Config {
         c.segment.band_max_angle_deg = 0.0;
         c.segment.outlier_scales = 0.0;
         c.segment.curved_merge_ratio = 0.0;
+        c.segment.small_face_min_px = 0;
         c.segment.bend_max_angle_deg = 0.0;
         c.segment.terrace_gap_steps = 0.0;
         c.segment.within_joint_rms_ratio = 0.0;
@@ -538,6 +539,22 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "Last, adjacent regions merge if one quadric fits their union within this multiple of their pooled plane RMS (0 = off): a surface the depth encoding bends.",
     ),
     ("segment.curved_max_angle_deg", "Largest angle between two regions' normals for curved_merge_ratio."),
+    (
+        "segment.small_face_min_px",
+        "After the merges, a group of unlabelled pixels, this many up to under min_region_px, on a plane of its own between two or more regions becomes a region (0 = off).",
+    ),
+    (
+        "segment.small_face_scales",
+        "Three quarters of a small face's pixels lie within this many noise scales (its neighbours' largest RMS) of its plane.",
+    ),
+    (
+        "segment.small_face_min_gap",
+        "Smallest RMS distance of a small face's points to each neighbour's plane, in noise scales.",
+    ),
+    (
+        "segment.small_face_max_slant_deg",
+        "Largest angle between a small face's normal and the line of sight.",
+    ),
 ];
 
 /// The comment of `key` (`table.key`) in [`KEY_DOCS`].

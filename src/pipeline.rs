@@ -322,7 +322,7 @@ impl Segmenter {
         let t = Instant::now();
         // A decimated frame's final edge map is drawn at full resolution (`upsample`).
         let inputs = (&out.features, &out.regions, &out.canny);
-        finish_into(range, camera, config, inputs, scratch, (&mut out.fin, full.is_none()));
+        finish_into(range, camera, config, inputs, scratch, (&mut out.fin, full.is_none(), step.is_some()));
         let (mut units, mut t_features, mut t_relax) = (units, t_features, elapsed_ms(t));
         out.decimation = 1;
         if let Some(full) = full {
@@ -425,19 +425,20 @@ pub fn finish(
     check(config, "finish");
     let mut fin = Finish::default();
     let mut scratch = Scratch { valid: rangeimage::valid_mask(range), ..Scratch::default() };
-    finish_into(range, camera, config, (features, regions, canny), &mut scratch, (&mut fin, true));
+    finish_into(range, camera, config, (features, regions, canny), &mut scratch, (&mut fin, true, false));
     fin
 }
 
 /// [`finish`] into `fin` with the buffers of `scratch`, whose `valid` holds the valid mask of `range`; the final edge
-/// map `fin.edges` only if `edges` (else it is left as it was).
+/// map `fin.edges` only if `edges` (else it is left as it was). On `dequantised` depth the final segmentation makes no
+/// small faces: the dequantiser's ramps along the steps, which it leaves unlabelled, would pass for them.
 fn finish_into(
     range: &RangeImage,
     camera: &Camera,
     config: &Config,
     (features, regions, canny): (&SurfaceFeatures, &regiongrow::Segmentation, &vcanny::Edges),
     scratch: &mut Scratch,
-    (fin, edges): (&mut Finish, bool),
+    (fin, edges, dequantised): (&mut Finish, bool, bool),
 ) {
     let valid = &scratch.valid;
     if config.pipeline.relax {
@@ -460,12 +461,16 @@ fn finish_into(
     // The segmentation sees both relaxed sets in full (before the support test): a border between
     // two faces that region growing merged has only C2 to show it.
     relax::union_into(&fin.relaxed.c1, &fin.relaxed.c2, &mut scratch.union);
+    let mut segment = config.segment.clone();
+    if dequantised {
+        segment.small_face_min_px = 0;
+    }
     finalseg::segment_into(
         range,
         camera,
         &scratch.union,
         Some(&regions.labels),
-        &config.segment,
+        &segment,
         &mut scratch.finalseg,
         (&mut fin.labels, &mut fin.final_regions),
     );

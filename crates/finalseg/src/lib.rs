@@ -1,13 +1,14 @@
 //! The final segmentation (docs/method.md §3.4 step 4): regions from the relaxed edge map,
 //! optionally guided by the region-growing labels and merged where the relaxed edges do not
 //! support a border. One entry point, [`segment`]; its steps live in one module each
-//! (`components`, `fill`, `merge`, `refine`, `band`, `crease`, `outliers`; the region planes in `plane`).
+//! (`components`, `fill`, `merge`, `refine`, `band`, `crease`, `outliers`, `curved`, `faces`; the region planes in `plane`).
 
 mod band;
 mod components;
 mod crease;
 mod curved;
 mod edges;
+mod faces;
 mod fill;
 mod merge;
 mod outliers;
@@ -90,6 +91,12 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    plane RMS pooled over their pixels (at least 0.25), and within `merge_max_residual`: one surface that a depth
 ///    encoding bends, cut along folds that are not there. Edge support does not matter here: the edges split a
 ///    surface only where its geometry changes.
+/// 9. Small faces (`small_face_min_px` > 0): a 4-connected group of valid unlabelled pixels, from `small_face_min_px`
+///    up to under `min_region_px`, becomes a region if it borders at least two regions, half of its pixels have all
+///    four neighbours in it, three quarters lie within `small_face_scales` noise scales of its plane (the largest RMS
+///    of the regions beside it, at least 0.25) with that plane's RMS within one, its points lie farther than
+///    `small_face_min_gap` noise scales (RMS) from every neighbour's plane, and its plane is seen at most
+///    `small_face_max_slant_deg` from the line of sight: a face too small or too thin for a region to grow in.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -138,6 +145,8 @@ pub struct Scratch {
     outliers: outliers::Buffers,
     /// Step 5b: the band step's buffers.
     band: band::Buffers,
+    /// Step 9: the small faces' buffers.
+    faces: faces::Buffers,
     /// Step 8: the curved merge's buffers.
     curved: curved::Buffers,
     /// Every pixel's 3D point, computed once a frame for steps 2–8.
@@ -190,6 +199,7 @@ pub fn segment_into(
         crease: crbufs,
         outliers: obufs,
         band: bbufs,
+        faces: fabufs,
         curved: cvbufs,
         points,
         parent,
@@ -262,7 +272,21 @@ pub fn segment_into(
         tracing::debug!(merges = n, "curved merges");
     }
 
-    // 9. Consecutive labels in raster order; region statistics.
+    // 9. Small faces among the unlabelled pixels.
+    if params.small_face_min_px > 0 {
+        let limits = faces::Limits {
+            min_px: params.small_face_min_px as usize,
+            max_px: params.min_region_px as usize,
+            scales: params.small_face_scales,
+            min_gap: params.small_face_min_gap,
+            max_slant_deg: params.small_face_max_slant_deg,
+        };
+        let grow = (&mut *parent, &mut pieces.moments, &mut pieces.planes, &mut pieces.guide);
+        let n = faces::recover(&scene, &mut pieces.comp, grow, limits, fabufs);
+        tracing::debug!(faces = n, "small faces");
+    }
+
+    // 10. Consecutive labels in raster order; region statistics.
     pieces.relabel((parent, root, map, order), (w, h), (labels, out));
     (*comp_guide, *moments, *planes) = (pieces.guide, pieces.moments, pieces.planes);
 }

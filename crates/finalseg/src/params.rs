@@ -126,6 +126,20 @@ pub struct Params {
     pub curved_merge_ratio: f64,
     /// Largest angle between two regions' normals for `curved_merge_ratio`.
     pub curved_max_angle_deg: f64,
+    /// Last, a 4-connected group of valid unlabelled pixels, from this many pixels up to under `min_region_px`, that
+    /// lies on one plane of its own between at least two regions becomes a region (0 = off): a face too small or too
+    /// thin for a region to grow in (docs/method.md, the final segmentation's step 9).
+    pub small_face_min_px: u32,
+    /// `small_face_min_px` > 0: a pixel lies on the group's plane within this many noise scales (the largest RMS of the
+    /// regions beside the group, at least 0.25 units); three quarters of the group must, and the plane's RMS must be
+    /// within one noise scale.
+    pub small_face_scales: f64,
+    /// `small_face_min_px` > 0: smallest RMS distance of the face's points to each neighbour's plane, in noise scales
+    /// (a terrace of a quantised slope lies within a few noise scales of the slope's plane).
+    pub small_face_min_gap: f64,
+    /// `small_face_min_px` > 0: largest angle between the face's normal and the line of sight (a plane seen more
+    /// nearly edge-on is the ramp of mixed pixels at a jump; region growing's `max_slant_deg` by default).
+    pub small_face_max_slant_deg: f64,
 }
 
 impl Default for Params {
@@ -157,6 +171,10 @@ impl Default for Params {
             outlier_min_px: 10,
             curved_merge_ratio: 1.1,
             curved_max_angle_deg: 15.0,
+            small_face_min_px: 40,
+            small_face_scales: 2.5,
+            small_face_min_gap: 4.0,
+            small_face_max_slant_deg: 80.0,
         }
     }
 }
@@ -189,6 +207,9 @@ impl Params {
         }
         ParamError::at_least("segment.curved_merge_ratio", self.curved_merge_ratio, 0.0)?;
         ParamError::in_range("segment.curved_max_angle_deg", self.curved_max_angle_deg, 0.0, 90.0)?;
+        ParamError::at_least("segment.small_face_scales", self.small_face_scales, 0.0)?;
+        ParamError::at_least("segment.small_face_min_gap", self.small_face_min_gap, 0.0)?;
+        ParamError::in_range("segment.small_face_max_slant_deg", self.small_face_max_slant_deg, 0.0, 90.0)?;
         Ok(())
     }
 }

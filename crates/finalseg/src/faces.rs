@@ -1,0 +1,280 @@
+//! Step 9 of the final segmentation: small faces among the pixels no region holds.
+//!
+//! A face too small to be kept as a region (under `min_region_px`), or too thin for a window to fit inside it, ends
+//! the earlier steps unlabelled: its pixels lie off every neighbour's plane, so the fill leaves them. When such a
+//! group of unlabelled pixels lies on one plane of its own, that plane is not a neighbour's, and the group sits
+//! between at least two regions, it is a face, and it becomes a region. The tests keep out what else is left
+//! unlabelled: a terrace of a quantised slope (within a few noise scales of the slope's plane), the mixed pixels of a
+//! jump (a "plane" seen almost edge-on), a dent or an object on one surface (enclosed by that surface alone), a line
+//! of pixels (any plane through it fits).
+
+use crate::Scene;
+use crate::plane::{Plane, fit_plane, mean_sq_residual};
+use crate::refine::SIGMA_FLOOR;
+use planefit::{Moments, dot};
+use rangeimage::union_find::find;
+
+/// Fewest regions a face borders (4-adjacency): a group inside one region is a dent or an object on it.
+const MIN_NEIGHBOURS: usize = 2;
+/// Smallest share of a face's pixels within [`Limits::scales`] noise scales of its plane (the others are the
+/// mixed pixels along its border, which the face keeps).
+const MIN_INLIER_SHARE: f64 = 0.75;
+/// Smallest share of a face's pixels whose four neighbours are in the face too: a line of pixels, or a scatter of
+/// specks, has almost none.
+const MIN_INTERIOR_SHARE: f64 = 0.5;
+
+/// The working memory of [`recover`], kept from one frame to the next.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    /// Per pixel: reached by a flood fill.
+    seen: Vec<bool>,
+    /// The flood fill's stack, the group it gathers, and the group's pixels that fit its plane.
+    stack: Vec<u32>,
+    group: Vec<u32>,
+    inliers: Vec<u32>,
+    /// The merged groups (roots) of the regions beside the group.
+    beside: Vec<u32>,
+}
+
+/// The limits of [`recover`] (the `small_face_*` parameters and `min_region_px`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Limits {
+    /// Smallest face, in pixels.
+    pub(crate) min_px: usize,
+    /// Every face is smaller than this (larger groups had their chance as components).
+    pub(crate) max_px: usize,
+    /// A pixel lies on the face's plane within this many noise scales; the noise scale is the largest RMS of the
+    /// regions beside the group (at least [`SIGMA_FLOOR`]), and the face's own RMS must be within it.
+    pub(crate) scales: f64,
+    /// Smallest RMS distance of the face's points to each neighbour's plane, in noise scales.
+    pub(crate) min_gap: f64,
+    /// Largest angle, in degrees, between the face's normal and the line of sight at its centroid.
+    pub(crate) max_slant_deg: f64,
+}
+
+/// Makes a new region of each 4-connected group of valid unlabelled pixels of `comp` that is a face by [`Limits`]
+/// and the constants above. `comp` holds a label per pixel whose merged group's root in `parent` indexes `planes`
+/// (at `root − 1`); `parent`, `moments`, `planes` and `guide` grow by one entry per face (its own root, the moments
+/// and plane of the pixels that fit it, no region-growing label). Groups are found in raster order of their first
+/// pixel and their sums taken in raster order, so the result does not depend on the flood fill's path. Returns the
+/// number of faces made.
+pub(crate) fn recover(
+    scene: &Scene<'_>,
+    comp: &mut [u32],
+    (parent, moments, planes, guide): (&mut Vec<u32>, &mut Vec<Moments>, &mut Vec<Plane>, &mut Vec<u32>),
+    limits: Limits,
+    bufs: &mut Buffers,
+) -> usize {
+    let (w, h) = (scene.w, scene.h);
+    let Buffers { seen, stack, group, inliers, beside } = bufs;
+    seen.clear();
+    seen.resize(w * h, false);
+    // Room for every pixel once, reserved once, so later frames reuse the memory.
+    for v in [&mut *stack, &mut *group, &mut *inliers] {
+        v.clear();
+        v.reserve(w * h);
+    }
+    let free = |j: usize, comp: &[u32]| comp[j] == 0 && scene.range[j].is_finite();
+    let cos_max_slant = limits.max_slant_deg.to_radians().cos();
+    let mut made = 0;
+    for s in 0..w * h {
+        if seen[s] || !free(s, comp) {
+            continue;
+        }
+        group.clear();
+        beside.clear();
+        stack.push(s as u32);
+        seen[s] = true;
+        let mut interior = 0usize;
+        while let Some(i) = stack.pop() {
+            group.push(i);
+            let i = i as usize;
+            let (x, y) = (i % w, i / w);
+            let mut inside = 0;
+            for (ok, j) in [
+                (x > 0, i.wrapping_sub(1)),
+                (x + 1 < w, i + 1),
+                (y > 0, i.wrapping_sub(w)),
+                (y + 1 < h, i + w),
+            ] {
+                if !ok {
+                    continue;
+                }
+                if free(j, comp) {
+                    inside += 1;
+                    if !seen[j] {
+                        seen[j] = true;
+                        stack.push(j as u32);
+                    }
+                } else if comp[j] != 0 {
+                    let r = find(parent, comp[j]);
+                    if !beside.contains(&r) {
+                        beside.push(r);
+                    }
+                }
+            }
+            interior += usize::from(inside == 4);
+        }
+        let n = group.len();
+        if n < limits.min_px
+            || n >= limits.max_px
+            || beside.len() < MIN_NEIGHBOURS
+            || (interior as f64) < MIN_INTERIOR_SHARE * n as f64
+        {
+            continue;
+        }
+        group.sort_unstable();
+        let sigma = beside.iter().map(|&r| planes[r as usize - 1].rms).fold(SIGMA_FLOOR, f64::max);
+        let mut m = Moments::default();
+        for &i in group.iter() {
+            m.add(scene.points[i as usize]);
+        }
+        let mut plane = fit_plane(&m, scene.camera);
+        // Twice: keep the pixels within the limit of the plane, refit on them.
+        for _ in 0..2 {
+            inliers.clear();
+            inliers.extend(
+                group
+                    .iter()
+                    .copied()
+                    .filter(|&i| plane.residual(scene.points[i as usize]) <= limits.scales * sigma),
+            );
+            if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 {
+                break;
+            }
+            m = Moments::default();
+            for &i in inliers.iter() {
+                m.add(scene.points[i as usize]);
+            }
+            plane = fit_plane(&m, scene.camera);
+        }
+        if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 || plane.rms > sigma {
+            continue;
+        }
+        let seen_from = dot(plane.normal, scene.camera.toward_sensor(m.centroid())).abs();
+        // The RMS distance of the face's points to the nearest neighbour's plane, in noise scales.
+        let gap = beside
+            .iter()
+            .map(|&r| mean_sq_residual(&m, &planes[r as usize - 1]).sqrt() / sigma)
+            .fold(f64::INFINITY, f64::min);
+        tracing::trace!(
+            x = s % w,
+            y = s / w,
+            n,
+            rms = plane.rms,
+            sigma,
+            gap,
+            seen_from,
+            "small face candidate"
+        );
+        if seen_from < cos_max_slant || gap <= limits.min_gap {
+            continue;
+        }
+        planes.push(plane);
+        moments.push(m);
+        guide.push(0);
+        let label = planes.len() as u32;
+        parent.push(label);
+        for &i in group.iter() {
+            comp[i as usize] = label;
+        }
+        made += 1;
+    }
+    made
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rangeimage::Camera;
+
+    /// The limits of the default configuration.
+    const LIMITS: Limits = Limits { min_px: 40, max_px: 200, scales: 2.5, min_gap: 4.0, max_slant_deg: 80.0 };
+
+    /// A 40 × 12 grid image with ±0.2 of checkerboard noise: the plane v = 100 at x < 15 (label 1), `middle(x)` at
+    /// 15 ≤ x < 25 (unlabelled, 120 px) and v = 122 at x ≥ 25 (label `right`). Returns the labels after [`recover`]
+    /// with `limits`, the number of faces made and the new planes' count.
+    fn recovered(middle: impl Fn(usize) -> f32, right: u32, limits: Limits) -> (Vec<u32>, usize, usize) {
+        let (w, h) = (40usize, 12usize);
+        let range: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let noise = if (x + y) % 2 == 0 { 0.2 } else { -0.2 };
+                noise
+                    + match x {
+                        ..15 => 100.0,
+                        15..25 => middle(x),
+                        _ => 122.0,
+                    }
+            })
+            .collect();
+        let camera = Camera::Grid;
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
+        let mut comp: Vec<u32> = (0..w * h)
+            .map(|i| match i % w {
+                ..15 => 1,
+                15..25 => 0,
+                _ => right,
+            })
+            .collect();
+        let mut moments = vec![Moments::default(); 2];
+        for (i, &l) in comp.iter().enumerate() {
+            if l != 0 {
+                moments[l as usize - 1].add(scene.point(i % w, i / w).unwrap());
+            }
+        }
+        let mut planes: Vec<Plane> = moments.iter().map(|m| fit_plane(m, &camera)).collect();
+        let (mut parent, mut guide) = (vec![0, 1, 2], vec![0, 0]);
+        let grow = (&mut parent, &mut moments, &mut planes, &mut guide);
+        let n = recover(&scene, &mut comp, grow, limits, &mut Buffers::default());
+        // Every new region is its own root, with its moments, plane and an empty guide label.
+        assert_eq!((parent.len(), moments.len(), guide.len()), (3 + n, 2 + n, 2 + n));
+        assert!(parent[3..].iter().enumerate().all(|(k, &p)| p == k as u32 + 3));
+        (comp, n, planes.len())
+    }
+
+    /// A named case of [`recovered`]: the middle's depth, the right region's label and the limits.
+    type Case<'a> = (&'a str, &'a dyn Fn(usize) -> f32, u32, Limits);
+
+    /// The labels of the middle columns.
+    fn middle_labels(comp: &[u32]) -> Vec<u32> {
+        comp.chunks_exact(40).flat_map(|row| row[15..25].to_vec()).collect()
+    }
+
+    #[test]
+    fn a_face_between_two_regions_becomes_a_region() {
+        // A slope of 2 per pixel (about 63° from the line of sight) between two flat regions.
+        let (comp, n, planes) = recovered(|x| 100.0 + 2.0 * (x as f32 - 14.0), 2, LIMITS);
+        assert_eq!((n, planes), (1, 3));
+        assert!(middle_labels(&comp).iter().all(|&l| l == 3));
+        // The regions beside it keep their pixels.
+        assert!(
+            comp.chunks_exact(40)
+                .all(|row| row[..15].iter().all(|&l| l == 1) && row[25..].iter().all(|&l| l == 2))
+        );
+    }
+
+    #[test]
+    fn what_is_not_a_face_stays_unlabelled() {
+        let slope = |x: usize| 100.0 + 2.0 * (x as f32 - 14.0);
+        let cases: [Case<'_>; 6] = [
+            // Within 0.6 of the left plane (2.4 noise scales): a terrace of that surface.
+            ("terrace", &|_| 100.6, 2, LIMITS),
+            // A slope of 10 per pixel: seen within 6° of edge-on, the ramp of a jump.
+            ("edge-on", &|x| 100.0 + 10.0 * (x as f32 - 14.0), 2, LIMITS),
+            // Enclosed by one region (label 1 on both sides).
+            ("enclosed", &slope, 1, LIMITS),
+            // 120 px is not under a min_region_px of 100: such a group had its chance as a component.
+            ("large", &slope, 2, Limits { max_px: 100, ..LIMITS }),
+            ("small", &slope, 2, Limits { min_px: 121, ..LIMITS }),
+            // A rough surface: ±3 of noise on the slope is beyond one noise scale of RMS.
+            ("rough", &|x| slope(x) + if x % 2 == 0 { 3.0 } else { -3.0 }, 2, LIMITS),
+        ];
+        for (name, middle, right, limits) in cases {
+            let (comp, n, planes) = recovered(middle, right, limits);
+            assert_eq!((n, planes), (0, 2), "{name}");
+            assert!(middle_labels(&comp).iter().all(|&l| l == 0), "{name}");
+        }
+    }
+}
