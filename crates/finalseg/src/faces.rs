@@ -191,20 +191,30 @@ mod tests {
     /// The limits of the default configuration.
     const LIMITS: Limits = Limits { min_px: 40, max_px: 200, scales: 2.5, min_gap: 4.0, max_slant_deg: 80.0 };
 
-    /// A 40 × 12 grid image with ±0.2 of checkerboard noise: the plane v = 100 at x < 15 (label 1), `middle(x)` at
-    /// 15 ≤ x < 25 (unlabelled, 120 px) and v = 122 at x ≥ 25 (label `right`). Returns the labels after [`recover`]
+    /// The middle of [`recovered`]'s default image: columns 15–24 of 12 rows (120 px).
+    const MIDDLE: (usize, std::ops::Range<usize>) = (12, 15..25);
+
+    /// A 40 × `h` grid image with ±0.2 of checkerboard noise: the plane v = 100 left of the columns `cols` (label 1),
+    /// `middle(x)` in them (unlabelled) and v = 122 right of them (label `right`). Returns the labels after [`recover`]
     /// with `limits`, the number of faces made and the new planes' count.
-    fn recovered(middle: impl Fn(usize) -> f32, right: u32, limits: Limits) -> (Vec<u32>, usize, usize) {
-        let (w, h) = (40usize, 12usize);
+    fn recovered(
+        (h, cols): (usize, std::ops::Range<usize>),
+        middle: impl Fn(usize) -> f32,
+        right: u32,
+        limits: Limits,
+    ) -> (Vec<u32>, usize, usize) {
+        let w = 40usize;
         let range: Vec<f32> = (0..w * h)
             .map(|i| {
                 let (x, y) = (i % w, i / w);
                 let noise = if (x + y) % 2 == 0 { 0.2 } else { -0.2 };
                 noise
-                    + match x {
-                        ..15 => 100.0,
-                        15..25 => middle(x),
-                        _ => 122.0,
+                    + if x < cols.start {
+                        100.0
+                    } else if cols.contains(&x) {
+                        middle(x)
+                    } else {
+                        122.0
                     }
             })
             .collect();
@@ -212,10 +222,15 @@ mod tests {
         let mut points = Vec::new();
         let scene = Scene::new(&range, (w, h), &camera, &mut points);
         let mut comp: Vec<u32> = (0..w * h)
-            .map(|i| match i % w {
-                ..15 => 1,
-                15..25 => 0,
-                _ => right,
+            .map(|i| {
+                let x = i % w;
+                if x < cols.start {
+                    1
+                } else if cols.contains(&x) {
+                    0
+                } else {
+                    right
+                }
             })
             .collect();
         let mut moments = vec![Moments::default(); 2];
@@ -237,17 +252,17 @@ mod tests {
     /// A named case of [`recovered`]: the middle's depth, the right region's label and the limits.
     type Case<'a> = (&'a str, &'a dyn Fn(usize) -> f32, u32, Limits);
 
-    /// The labels of the middle columns.
-    fn middle_labels(comp: &[u32]) -> Vec<u32> {
-        comp.chunks_exact(40).flat_map(|row| row[15..25].to_vec()).collect()
+    /// The labels of the columns `cols`.
+    fn middle_labels(comp: &[u32], cols: std::ops::Range<usize>) -> Vec<u32> {
+        comp.chunks_exact(40).flat_map(|row| row[cols.clone()].to_vec()).collect()
     }
 
     #[test]
     fn a_face_between_two_regions_becomes_a_region() {
         // A slope of 2 per pixel (about 63° from the line of sight) between two flat regions.
-        let (comp, n, planes) = recovered(|x| 100.0 + 2.0 * (x as f32 - 14.0), 2, LIMITS);
+        let (comp, n, planes) = recovered(MIDDLE, |x| 100.0 + 2.0 * (x as f32 - 14.0), 2, LIMITS);
         assert_eq!((n, planes), (1, 3));
-        assert!(middle_labels(&comp).iter().all(|&l| l == 3));
+        assert!(middle_labels(&comp, MIDDLE.1).iter().all(|&l| l == 3));
         // The regions beside it keep their pixels.
         assert!(
             comp.chunks_exact(40)
@@ -272,9 +287,22 @@ mod tests {
             ("rough", &|x| slope(x) + if x % 2 == 0 { 3.0 } else { -3.0 }, 2, LIMITS),
         ];
         for (name, middle, right, limits) in cases {
-            let (comp, n, planes) = recovered(middle, right, limits);
+            let (comp, n, planes) = recovered(MIDDLE, middle, right, limits);
             assert_eq!((n, planes), (0, 2), "{name}");
-            assert!(middle_labels(&comp).iter().all(|&l| l == 0), "{name}");
+            assert!(middle_labels(&comp, MIDDLE.1).iter().all(|&l| l == 0), "{name}");
         }
+    }
+
+    #[test]
+    fn a_strip_without_interior_stays_unlabelled() {
+        // The same slope 2 px wide and 40 rows tall (80 px): no pixel has its four neighbours in the group, and a
+        // plane through so thin a strip means little. 6 px wide, half of its pixels are interior, and it is a face.
+        let slope = |x: usize| 100.0 + 2.0 * (x as f32 - 14.0);
+        let (comp, n, _) = recovered((40, 19..21), slope, 2, LIMITS);
+        assert_eq!(n, 0);
+        assert!(middle_labels(&comp, 19..21).iter().all(|&l| l == 0));
+        let (comp, n, _) = recovered((30, 17..23), slope, 2, LIMITS);
+        assert_eq!(n, 1);
+        assert!(middle_labels(&comp, 17..23).iter().all(|&l| l == 3));
     }
 }
