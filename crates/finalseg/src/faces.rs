@@ -23,11 +23,14 @@ const MIN_INLIER_SHARE: f64 = 0.75;
 /// specks, has almost none.
 const MIN_INTERIOR_SHARE: f64 = 0.5;
 
+/// The mark, in the labels, of a pixel of a group already gathered (until its group becomes a face, or until the end).
+const GATHERED: u32 = u32::MAX;
+
 /// The working memory of [`recover`], kept from one frame to the next.
 #[derive(Debug, Default)]
 pub(crate) struct Buffers {
-    /// Per pixel: reached by a flood fill.
-    seen: Vec<bool>,
+    /// The pixels of the groups that are no faces, which stay [`GATHERED`] until the end.
+    left: Vec<u32>,
     /// The flood fill's stack, the group it gathers, and the group's pixels that fit its plane.
     stack: Vec<u32>,
     group: Vec<u32>,
@@ -66,25 +69,23 @@ pub(crate) fn recover(
     bufs: &mut Buffers,
 ) -> usize {
     let (w, h) = (scene.w, scene.h);
-    let Buffers { seen, stack, group, inliers, beside } = bufs;
-    seen.clear();
-    seen.resize(w * h, false);
+    let Buffers { left, stack, group, inliers, beside } = bufs;
     // Room for every pixel once, reserved once, so later frames reuse the memory.
-    for v in [&mut *stack, &mut *group, &mut *inliers] {
+    for v in [&mut *left, &mut *stack, &mut *group, &mut *inliers] {
         v.clear();
         v.reserve(w * h);
     }
-    let free = |j: usize, comp: &[u32]| comp[j] == 0 && scene.range[j].is_finite();
-    let cos_max_slant = limits.max_slant_deg.to_radians().cos();
+    let valid = |j: usize| scene.range[j].is_finite();
     let mut made = 0;
     for s in 0..w * h {
-        if seen[s] || !free(s, comp) {
+        if comp[s] != 0 || !valid(s) {
             continue;
         }
+        // The group: unlabelled valid pixels, marked as they are reached.
         group.clear();
         beside.clear();
         stack.push(s as u32);
-        seen[s] = true;
+        comp[s] = GATHERED;
         let mut interior = 0usize;
         while let Some(i) = stack.pop() {
             group.push(i);
@@ -100,87 +101,112 @@ pub(crate) fn recover(
                 if !ok {
                     continue;
                 }
-                if free(j, comp) {
-                    inside += 1;
-                    if !seen[j] {
-                        seen[j] = true;
+                match comp[j] {
+                    // Another group's pixels are never 4-adjacent to this one's.
+                    GATHERED => inside += 1,
+                    0 if valid(j) => {
+                        inside += 1;
+                        comp[j] = GATHERED;
                         stack.push(j as u32);
                     }
-                } else if comp[j] != 0 {
-                    let r = find(parent, comp[j]);
-                    if !beside.contains(&r) {
-                        beside.push(r);
+                    0 => {}
+                    l => {
+                        let r = find(parent, l);
+                        if !beside.contains(&r) {
+                            beside.push(r);
+                        }
                     }
                 }
             }
             interior += usize::from(inside == 4);
         }
-        let n = group.len();
-        if n < limits.min_px
-            || n >= limits.max_px
-            || beside.len() < MIN_NEIGHBOURS
-            || (interior as f64) < MIN_INTERIOR_SHARE * n as f64
-        {
-            continue;
-        }
-        group.sort_unstable();
-        let sigma = beside.iter().map(|&r| planes[r as usize - 1].rms).fold(SIGMA_FLOOR, f64::max);
-        let mut m = Moments::default();
-        for &i in group.iter() {
-            m.add(scene.points[i as usize]);
-        }
-        let mut plane = fit_plane(&m, scene.camera);
-        // Twice: keep the pixels within the limit of the plane, refit on them.
-        for _ in 0..2 {
-            inliers.clear();
-            inliers.extend(
-                group
-                    .iter()
-                    .copied()
-                    .filter(|&i| plane.residual(scene.points[i as usize]) <= limits.scales * sigma),
-            );
-            if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 {
-                break;
+        match face(scene, (group, interior), beside, planes, limits, inliers) {
+            Some((plane, m)) => {
+                planes.push(plane);
+                moments.push(m);
+                guide.push(0);
+                let label = planes.len() as u32;
+                parent.push(label);
+                for &i in group.iter() {
+                    comp[i as usize] = label;
+                }
+                made += 1;
             }
-            m = Moments::default();
-            for &i in inliers.iter() {
-                m.add(scene.points[i as usize]);
-            }
-            plane = fit_plane(&m, scene.camera);
+            None => left.extend_from_slice(group),
         }
-        if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 || plane.rms > sigma {
-            continue;
-        }
-        let seen_from = dot(plane.normal, scene.camera.toward_sensor(m.centroid())).abs();
-        // The RMS distance of the face's points to the nearest neighbour's plane, in noise scales.
-        let gap = beside
-            .iter()
-            .map(|&r| mean_sq_residual(&m, &planes[r as usize - 1]).sqrt() / sigma)
-            .fold(f64::INFINITY, f64::min);
-        tracing::trace!(
-            x = s % w,
-            y = s / w,
-            n,
-            rms = plane.rms,
-            sigma,
-            gap,
-            seen_from,
-            "small face candidate"
-        );
-        if seen_from < cos_max_slant || gap <= limits.min_gap {
-            continue;
-        }
-        planes.push(plane);
-        moments.push(m);
-        guide.push(0);
-        let label = planes.len() as u32;
-        parent.push(label);
-        for &i in group.iter() {
-            comp[i as usize] = label;
-        }
-        made += 1;
+    }
+    for &i in left.iter() {
+        comp[i as usize] = 0;
     }
     made
+}
+
+/// Whether the gathered `group` (`interior` of its pixels with their four neighbours in it; `beside`, the roots of the
+/// regions around it, whose planes are `planes[root − 1]`) is a face by `limits` and the constants above: its plane and
+/// the moments of the pixels that fit it if so. Sorts `group` into raster order; `inliers` is working memory.
+fn face(
+    scene: &Scene<'_>,
+    (group, interior): (&mut [u32], usize),
+    beside: &[u32],
+    planes: &[Plane],
+    limits: Limits,
+    inliers: &mut Vec<u32>,
+) -> Option<(Plane, Moments)> {
+    let n = group.len();
+    if n < limits.min_px
+        || n >= limits.max_px
+        || beside.len() < MIN_NEIGHBOURS
+        || (interior as f64) < MIN_INTERIOR_SHARE * n as f64
+    {
+        return None;
+    }
+    // Raster order, so the sums do not depend on the flood fill's path.
+    group.sort_unstable();
+    let sigma = beside.iter().map(|&r| planes[r as usize - 1].rms).fold(SIGMA_FLOOR, f64::max);
+    let mut m = Moments::default();
+    for &i in group.iter() {
+        m.add(scene.points[i as usize]);
+    }
+    let mut plane = fit_plane(&m, scene.camera);
+    // Twice: keep the pixels within the limit of the plane, refit on them.
+    for _ in 0..2 {
+        inliers.clear();
+        inliers.extend(
+            group
+                .iter()
+                .copied()
+                .filter(|&i| plane.residual(scene.points[i as usize]) <= limits.scales * sigma),
+        );
+        if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 {
+            break;
+        }
+        m = Moments::default();
+        for &i in inliers.iter() {
+            m.add(scene.points[i as usize]);
+        }
+        plane = fit_plane(&m, scene.camera);
+    }
+    if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 || plane.rms > sigma {
+        return None;
+    }
+    let seen_from = dot(plane.normal, scene.camera.toward_sensor(m.centroid())).abs();
+    // The RMS distance of the face's points to the nearest neighbour's plane, in noise scales.
+    let gap = beside
+        .iter()
+        .map(|&r| mean_sq_residual(&m, &planes[r as usize - 1]).sqrt() / sigma)
+        .fold(f64::INFINITY, f64::min);
+    let first = group[0] as usize;
+    tracing::trace!(
+        x = first % scene.w,
+        y = first / scene.w,
+        n,
+        rms = plane.rms,
+        sigma,
+        gap,
+        seen_from,
+        "small face candidate"
+    );
+    (seen_from >= limits.max_slant_deg.to_radians().cos() && gap > limits.min_gap).then_some((plane, m))
 }
 
 #[cfg(test)]
