@@ -411,6 +411,7 @@ impl Segmenters {
 }
 
 /// The last stage: relaxes C1 (from `regions`) and C2 (from `canny`), then derives the final segmentation.
+/// It makes small faces as `config` says, whatever `range` is; a [`Segmenter`] makes none on a frame it dequantised.
 ///
 /// # Panics
 /// If `config` is invalid ([`Config::validate`]).
