@@ -223,7 +223,13 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(&scene, (sizes, &mut cbufs.id), kept, guide, params.min_region_px);
+    pieces.fit(
+        &scene,
+        (sizes, &mut cbufs.id),
+        kept,
+        guide,
+        (params.min_region_px, params.most_regions(w * h)),
+    );
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -266,7 +272,7 @@ pub fn segment_into(
             &[]
         };
         let fits = (&mut pieces.moments[..], &mut pieces.planes[..]);
-        let room = (w * h) / (params.min_region_px.max(1) as usize) + 1;
+        let room = params.most_regions(w * h);
         let all = (rbufs.moments(), released);
         let n = curved::merge_curved(&scene, &pieces.comp, parent, fits, all, limits, (cvbufs, room));
         tracing::debug!(merges = n, "curved merges");
@@ -480,15 +486,15 @@ impl Pieces {
     /// component of label `l`, rewritten here into its new label) under `min_region_px` pixels, numbers the kept
     /// ones consecutively in their order (`kept[c − 1]`, the new label of component `c`, 0 if dropped), and fits
     /// a plane to each. The numbering keeps the order of the labels, so every later step (ties to the smaller
-    /// label, pairs in sorted order, union-find roots) decides as it would on the component numbers; and the
-    /// per-region vectors hold at most one entry per `min_region_px` pixels.
+    /// label, pairs in sorted order, union-find roots) decides as it would on the component numbers; the per-region
+    /// vectors reserve `room` entries (the most regions a frame can end with, small faces included).
     fn fit(
         &mut self,
         scene: &Scene<'_>,
         (sizes, ids): (&[u32], &mut [u32]),
         kept: &mut Vec<u32>,
         guide: Option<&[u32]>,
-        min_region_px: u32,
+        (min_region_px, room): (u32, usize),
     ) {
         let (w, h) = (scene.w, scene.h);
         kept.clear();
@@ -506,8 +512,7 @@ impl Pieces {
         for c in ids.iter_mut().skip(1) {
             *c = kept[*c as usize - 1];
         }
-        // Room for every region a frame of this size can keep, so later frames reuse the memory.
-        let room = (w * h) / (min_region_px.max(1) as usize) + 1;
+        // Room for every region a frame of this size can end with, so later frames reuse the memory.
         let n = n_kept as usize;
         // The region-growing label of each region (all its pixels share one; 0 without a guide).
         self.guide.clear();
@@ -657,6 +662,16 @@ mod tests {
     /// A 4×4 patch 20 units in front of a flat 40×30 plane, all of it edge pixels: without a fill
     /// limit (and without the outlier step) the plane's region swallows it, with `fill_max_residual = 3` it
     /// stays 0; so it does without a fill limit when the outlier step releases it.
+    #[test]
+    fn the_region_reserve_counts_small_faces() {
+        // Faces of 40 px or more join the regions of 200 px or more: a 512² frame can end with 6,554 regions, not
+        // 1,311; without faces, or with faces no smaller than the regions, one per 200 px.
+        let px = 512 * 512;
+        assert_eq!(Params::default().most_regions(px), px / 40 + 1);
+        assert_eq!(Params { small_face_min_px: 0, ..Params::default() }.most_regions(px), px / 200 + 1);
+        assert_eq!(Params { small_face_min_px: 500, ..Params::default() }.most_regions(px), px / 200 + 1);
+    }
+
     #[test]
     fn fill_limit_leaves_off_plane_pixels_unlabelled() {
         let patch = |x: u32, y: u32| (5..9).contains(&x) && (5..9).contains(&y);

@@ -113,7 +113,7 @@ pub(crate) fn merge_unsupported(
     let Buffers { hor, near, borders, candidates, close } = bufs;
     near_edges(edges, scene.w, scene.h, hor, near);
     let bends = params.bend_max_angle_deg > 0.0;
-    let room = (scene.w * scene.h) / (params.min_region_px.max(1) as usize) + 1;
+    let room = params.most_regions(scene.w * scene.h);
     borders.reset(pieces.planes.len(), room);
     // Pieces of one region-growing region that a gap of unlabelled pixels separates are candidates too.
     let close = (params.merge_within_region && params.within_close_px > 0).then_some((

@@ -180,6 +180,16 @@ impl Default for Params {
 }
 
 impl Params {
+    /// The most regions a frame of `px` pixels can end with: one per `min_region_px` pixels, or per
+    /// `small_face_min_px` pixels where small faces are made (the per-region vectors reserve this many once).
+    pub fn most_regions(&self, px: usize) -> usize {
+        let smallest = match self.small_face_min_px {
+            0 => self.min_region_px,
+            f => f.min(self.min_region_px),
+        };
+        px / smallest.max(1) as usize + 1
+    }
+
     /// Checks the values; the error names the offending field.
     pub fn validate(&self) -> Result<(), ParamError> {
         if self.min_region_px == 0 {
