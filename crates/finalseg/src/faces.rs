@@ -41,6 +41,8 @@ pub(crate) struct Buffers {
     /// The trimmed fit's working memory: the group's pixels by their residuals, and the best-fitting ones.
     ranked: Vec<(f64, u32)>,
     trimmed: Vec<u32>,
+    /// The group's interior pixels (their four neighbours in the group).
+    core: Vec<u32>,
     /// The merged groups (roots) of the regions beside the group.
     beside: Vec<u32>,
 }
@@ -75,10 +77,10 @@ pub(crate) fn recover(
     bufs: &mut Buffers,
 ) -> usize {
     let (w, h) = (scene.w, scene.h);
-    let Buffers { left, stack, group, inliers, ranked, trimmed, beside } = bufs;
+    let Buffers { left, stack, group, inliers, ranked, trimmed, core, beside } = bufs;
     // Room for every pixel once, reserved once, so later frames reuse the memory; the trimmed fit sees only groups
     // under the size limit.
-    for v in [&mut *left, &mut *stack, &mut *group] {
+    for v in [&mut *left, &mut *stack, &mut *group, &mut *core] {
         v.clear();
         v.reserve(w * h);
     }
@@ -99,7 +101,7 @@ pub(crate) fn recover(
         beside.clear();
         stack.push(s as u32);
         comp[s] = GATHERED;
-        let mut interior = 0usize;
+        core.clear();
         while let Some(i) = stack.pop() {
             group.push(i);
             let i = i as usize;
@@ -131,9 +133,11 @@ pub(crate) fn recover(
                     }
                 }
             }
-            interior += usize::from(inside == 4);
+            if inside == 4 {
+                core.push(i as u32);
+            }
         }
-        match face(scene, (group, interior), beside, planes, limits, (inliers, ranked, trimmed)) {
+        match face(scene, (group, core), beside, planes, limits, (inliers, ranked, trimmed)) {
             Some((plane, m)) => {
                 planes.push(plane);
                 moments.push(m);
@@ -154,12 +158,13 @@ pub(crate) fn recover(
     made
 }
 
-/// Whether the gathered `group` (`interior` of its pixels with their four neighbours in it; `beside`, the roots of the
+/// Whether the gathered `group` (`core`, its pixels with their four neighbours in it; `beside`, the roots of the
 /// regions around it, whose planes are `planes[root − 1]`) is a face by `limits` and the constants above: its plane and
-/// the moments of the pixels that fit it if so. Sorts `group` into raster order; the last argument is working memory.
+/// the moments of the pixels that fit it if so. Sorts `group` and `core` into raster order; the last argument is
+/// working memory.
 fn face(
     scene: &Scene<'_>,
-    (group, interior): (&mut [u32], usize),
+    (group, core): (&mut [u32], &mut [u32]),
     beside: &[u32],
     planes: &[Plane],
     limits: Limits,
@@ -169,20 +174,22 @@ fn face(
     if n < limits.min_px
         || n >= limits.max_px
         || beside.len() < MIN_NEIGHBOURS
-        || (interior as f64) < MIN_INTERIOR_SHARE * n as f64
+        || (core.len() as f64) < MIN_INTERIOR_SHARE * n as f64
     {
         return None;
     }
     // Raster order, so the sums do not depend on the flood fill's path.
     group.sort_unstable();
     let sigma = beside.iter().map(|&r| planes[r as usize - 1].rms).fold(SIGMA_FLOOR, f64::max);
+    // The plane of the interior pixels to start from (the mixed pixels of a face lie along its border), then a trimmed
+    // fit, so that the spikes inside it do not tilt its plane either: the concentration steps of least trimmed squares,
+    // each refitting on the pixels (the share that must fit) nearest the last plane.
+    core.sort_unstable();
     let mut m = Moments::default();
-    for &i in group.iter() {
+    for &i in core.iter() {
         m.add(scene.points[i as usize]);
     }
     let mut plane = fit_plane(&m, scene.camera);
-    // A trimmed fit first, so that the mixed pixels and spikes of a small face do not tilt its plane: the concentration
-    // steps of least trimmed squares, each refitting on the pixels (the share that must fit) nearest the last plane.
     let keep = ((MIN_INLIER_SHARE * n as f64).ceil() as usize).clamp(1, n);
     inliers.clear();
     for _ in 0..MAX_TRIM_STEPS {
