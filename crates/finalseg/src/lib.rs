@@ -659,9 +659,6 @@ mod tests {
         (range, edges)
     }
 
-    /// A 4×4 patch 20 units in front of a flat 40×30 plane, all of it edge pixels: without a fill
-    /// limit (and without the outlier step) the plane's region swallows it, with `fill_max_residual = 3` it
-    /// stays 0; so it does without a fill limit when the outlier step releases it.
     #[test]
     fn the_region_reserve_counts_small_faces() {
         // Faces of 40 px or more join the regions of 200 px or more: a 512² frame can end with 6,554 regions, not
@@ -672,6 +669,9 @@ mod tests {
         assert_eq!(Params { small_face_min_px: 500, ..Params::default() }.most_regions(px), px / 200 + 1);
     }
 
+    /// A 4×4 patch 20 units in front of a flat 40×30 plane, all of it edge pixels: without a fill
+    /// limit (and without the outlier step) the plane's region swallows it, with `fill_max_residual = 3` it
+    /// stays 0; so it does without a fill limit when the outlier step releases it.
     #[test]
     fn fill_limit_leaves_off_plane_pixels_unlabelled() {
         let patch = |x: u32, y: u32| (5..9).contains(&x) && (5..9).contains(&y);
