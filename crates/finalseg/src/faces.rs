@@ -185,10 +185,7 @@ fn face(
     // fit, so that the spikes inside it do not tilt its plane either: the concentration steps of least trimmed squares,
     // each refitting on the pixels (the share that must fit) nearest the last plane.
     core.sort_unstable();
-    let mut m = Moments::default();
-    for &i in core.iter() {
-        m.add(scene.points[i as usize]);
-    }
+    let mut m = moments_of(scene, core);
     let mut plane = fit_plane(&m, scene.camera);
     let keep = ((MIN_INLIER_SHARE * n as f64).ceil() as usize).clamp(1, n);
     inliers.clear();
@@ -204,10 +201,7 @@ fn face(
             break;
         }
         std::mem::swap(trimmed, inliers);
-        m = Moments::default();
-        for &i in inliers.iter() {
-            m.add(scene.points[i as usize]);
-        }
+        m = moments_of(scene, inliers);
         plane = fit_plane(&m, scene.camera);
     }
     // Twice: keep the pixels within the limit of the plane, refit on them.
@@ -222,10 +216,7 @@ fn face(
         if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 {
             break;
         }
-        m = Moments::default();
-        for &i in inliers.iter() {
-            m.add(scene.points[i as usize]);
-        }
+        m = moments_of(scene, inliers);
         plane = fit_plane(&m, scene.camera);
     }
     if (inliers.len() as f64) < MIN_INLIER_SHARE * n as f64 || plane.rms > sigma {
@@ -249,6 +240,15 @@ fn face(
         "small face candidate"
     );
     (seen_from >= limits.max_slant_deg.to_radians().cos() && gap > limits.min_gap).then_some((plane, m))
+}
+
+/// The moments of the points of `pixels`, summed in their order.
+fn moments_of(scene: &Scene<'_>, pixels: &[u32]) -> Moments {
+    let mut m = Moments::default();
+    for &i in pixels {
+        m.add(scene.points[i as usize]);
+    }
+    m
 }
 
 #[cfg(test)]

@@ -223,13 +223,9 @@ pub fn segment_into(
         moments: std::mem::take(moments),
         planes: std::mem::take(planes),
     };
-    pieces.fit(
-        &scene,
-        (sizes, &mut cbufs.id),
-        kept,
-        guide,
-        (params.min_region_px, params.most_regions(w * h)),
-    );
+    // Room in the per-region vectors for every region the frame can end with (steps 2, 8 and 9).
+    let room = params.most_regions(w * h);
+    pieces.fit(&scene, (sizes, &mut cbufs.id), kept, guide, (params.min_region_px, room));
 
     // 3. Fill unlabelled valid pixels ring by ring.
     let limit = fill::Limit { max_residual: params.fill_max_residual, rms_ratio: params.fill_rms_ratio };
@@ -272,7 +268,6 @@ pub fn segment_into(
             &[]
         };
         let fits = (&mut pieces.moments[..], &mut pieces.planes[..]);
-        let room = params.most_regions(w * h);
         let all = (rbufs.moments(), released);
         let n = curved::merge_curved(&scene, &pieces.comp, parent, fits, all, limits, (cvbufs, room));
         tracing::debug!(merges = n, "curved merges");
