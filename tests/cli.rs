@@ -219,6 +219,52 @@ fn info_says_which_depth_is_a_staircase() {
     assert!(b.contains("step 4.0000; a staircase") && b.contains("dequantised"), "{out}");
 }
 
+#[test]
+fn regions_and_edges_write_what_segment_grows_and_detects() {
+    // Two frames `segment` prepares before its stages run: a staircase, which it dequantises, and a Kinect-like
+    // frame with `configs/fast.toml`, which it decimates. `regions` and `edges` must prepare them alike.
+    let dir = tempfile::tempdir().unwrap();
+    let stairs = dir.path().join("stairs.range");
+    let (params, seed) = scenegen::family_image(scenegen::Family::Staircase, 1.33, false, 2);
+    rangeio::abw::write_range(&stairs, &crate::range_of(&scenegen::generate(&params, seed))).unwrap();
+    let hall = dir.path().join("hall.png");
+    let (range, _, _) = crate::pipeline::hall_gt();
+    let tum = range.map(|&z| if z.is_finite() { (f64::from(z) * 5000.0).round() as u16 } else { 0 });
+    rangeio::png::write_gray16_png(&hall, &tum).unwrap();
+    let fast = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/fast.toml");
+    let hall_args =
+        ["--camera".as_ref(), "pinhole:525,525,319.5,239.5".as_ref(), "--config".as_ref(), fast.as_os_str()];
+    for (input, stem, extra, prepared) in
+        [(&stairs, "stairs", &[][..], "dequantised_step"), (&hall, "hall", &hall_args[..], "decimation")]
+    {
+        let (seg, reg, edges) =
+            (dir.path().join("seg"), dir.path().join(stem), dir.path().join(format!("{stem}.png")));
+        for (cmd, out) in [("segment", &seg), ("regions", &reg), ("edges", &edges)] {
+            let mut args = vec![cmd.as_ref(), input.as_os_str(), "-o".as_ref(), out.as_os_str()];
+            args.extend_from_slice(extra);
+            let o = rangeseg(&args);
+            assert!(o.status.success(), "{args:?}: {}", stderr_of(&o));
+        }
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(seg.join(format!("{stem}.json"))).unwrap()).unwrap();
+        let done = &json[prepared];
+        assert!(done.as_f64().is_some_and(|v| v > 1.0), "{stem}: {prepared} {done}");
+        let read = |p: &Path| rangeio::png::read_edge_png(p).unwrap();
+        let differ = |a: &rangeimage::EdgeMap, b: &rangeimage::EdgeMap| {
+            a.as_slice().iter().zip(b.as_slice()).filter(|(x, y)| x != y).count()
+        };
+        let c1 = read(&seg.join(format!("{stem}.c1.png")));
+        assert!(c1.as_slice().iter().filter(|&&e| e).count() > 500, "{stem}: the frame has region borders");
+        assert_eq!(
+            differ(&read(&reg.join(format!("{stem}.c1.png"))), &c1),
+            0,
+            "{stem}: C1 pixels that differ"
+        );
+        let c2 = read(&seg.join(format!("{stem}.c2.png")));
+        assert_eq!(differ(&read(&edges), &c2), 0, "{stem}: C2 pixels that differ");
+    }
+}
+
 /// A 512² checkerboard of 30-px cells, each a plane of its own tilt: more regions than `.ms-seg` holds.
 fn checkerboard() -> rangeimage::Grid<u16> {
     rangeimage::Grid::from_fn(512, 512, |x, y| {

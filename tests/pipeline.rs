@@ -288,7 +288,7 @@ fn hall() -> (rangeimage::RangeImage, rangeimage::Camera) {
 }
 
 /// [`hall`] and its ground truth (each plane is one connected region).
-fn hall_gt() -> (rangeimage::RangeImage, rangeimage::Camera, rangeimage::LabelImage) {
+pub(crate) fn hall_gt() -> (rangeimage::RangeImage, rangeimage::Camera, rangeimage::LabelImage) {
     render_room_gt(
         &[
             ([0.0, -1.0, 0.0], -1.0, None),

@@ -16,7 +16,9 @@ pub(crate) struct Args {
     /// Run Canny on the raw depth instead of the plane parameters (the paper's baseline).
     #[arg(long)]
     raw: bool,
-    /// Configuration file (see `configs/`; this command uses `[features]`, `[vcanny]` and, with --raw, `[raw_canny]`).
+    /// Configuration file (see `configs/`). The plane-parameter edges are the C2 that `segment` finds with it: on the
+    /// depth as `[pipeline]` prepares it (dequantised, in working units, decimated), from `[features]` and
+    /// `[vcanny]`. With --raw: `[raw_canny]` on the depth as read.
     #[arg(long, value_name = "C.toml")]
     config: Option<PathBuf>,
     #[command(flatten)]
@@ -29,15 +31,13 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     super::prepare_out_file(&args.output)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
     let edges = if args.raw {
-        vcanny::detect_raw(&frame.range, &cfg.raw_canny.detector())
+        vcanny::detect_raw(&frame.range, &cfg.raw_canny.detector()).edges
     } else {
-        let (range, _) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
-        let plane = features::fit_planes(&range, cfg.features.window_px);
-        let valid = rangeimage::valid_mask(&frame.range);
-        vcanny::detect_planes(&plane, &valid, &cfg.vcanny)
+        // The whole method, for the C2 `segment` finds: the same depth preparation, so the same edges.
+        rangeseg::pipeline::segment(&frame.range, &frame.camera, &cfg).canny.edges
     };
-    rangeio::png::write_edge_png(&args.output, &edges.edges)?;
-    let n = edges.edges.as_slice().iter().filter(|&&e| e).count();
+    rangeio::png::write_edge_png(&args.output, &edges)?;
+    let n = edges.as_slice().iter().filter(|&&e| e).count();
     writeln!(
         std::io::stdout().lock(),
         "wrote {} ({} edge pixels, {})",

@@ -29,9 +29,9 @@ enum Command {
     Render(render::Args),
     /// Score a segmentation (and optionally an edge map) against ground truth.
     Score(score::Args),
-    /// Detect edges with Canny on plane parameters (or raw depth).
+    /// Detect edges with Canny on plane parameters, as `segment` does (C2), or on raw depth.
     Edges(edges::Args),
-    /// Segment by multi-seed region growing and write the regions and their borders C1.
+    /// Segment by multi-seed region growing, as `segment` does, and write the regions and their borders C1.
     Regions(regions::Args),
     /// Run the whole pipeline: regions, edges, relaxation, final segmentation.
     Segment(segment::Args),

@@ -1,4 +1,4 @@
-//! `rangeseg regions`: multi-seed region growing and its borders C1.
+//! `rangeseg regions`: multi-seed region growing and its borders C1, as `segment` runs them.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -14,7 +14,8 @@ pub(crate) struct Args {
     /// every region), NAME.c1.png and NAME.regions.png, NAME being the file name without its last extension.
     #[arg(short, long, value_name = "OUTDIR")]
     out: PathBuf,
-    /// Configuration file (see `configs/`; this command uses `seed`, `[features]` and `[regiongrow]`).
+    /// Configuration file (see `configs/`). The regions are those `segment` grows with it: on the depth as
+    /// `[pipeline]` prepares it (dequantised, in working units, decimated), from `[features]` and `[regiongrow]`.
     #[arg(long, value_name = "C.toml")]
     config: Option<PathBuf>,
     /// Seed of the random seed draws [default: the config's `seed`, else 0].
@@ -26,15 +27,14 @@ pub(crate) struct Args {
 
 /// Runs `rangeseg regions`.
 pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
-    let seed = args.seed.unwrap_or(cfg.seed);
+    let mut cfg = rangeseg::Config::load_or_default(args.config.as_deref())?;
+    cfg.seed = args.seed.unwrap_or(cfg.seed);
     super::prepare_out_dir(&args.out)?;
     let frame = rangeio::read(&args.file, &args.read.options())?;
-    let (range, units) = rangeseg::units::in_working_units(&frame.range, &frame.camera, &cfg);
-    let feats = features::compute(&range, &cfg.features);
-    let (mut seg, info) = regiongrow::grow(&range, &feats, &units.camera, &cfg.regiongrow, seed);
-    // The normals the .ms-nor holds, in the input's geometry.
-    units.input_normals(&mut seg.regions);
+    // The whole method, for the region growing `segment` runs: the same depth preparation, so the same regions
+    // (their normals, for the .ms-nor, are already in the input's geometry).
+    let out = rangeseg::pipeline::segment(&frame.range, &frame.camera, &cfg);
+    let (seg, info) = (&out.regions, &out.regions_info);
 
     let name =
         args.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
@@ -46,9 +46,9 @@ pub(crate) fn run(args: Args) -> anyhow::Result<ExitCode> {
     rangeio::png::write_label_png(&path("regions.png"), &seg.labels)?;
 
     let kept = mapping.iter().filter(|&&(_, new)| new != 0).count();
-    let mut out = std::io::stdout().lock();
+    let mut stdout = std::io::stdout().lock();
     writeln!(
-        out,
+        stdout,
         "{}: {} regions ({} written to .ms-seg), {} seeds, {} merged, {} dropped, {} filled px, {} valid px unlabelled",
         args.file.display(),
         info.n_regions,
