@@ -77,15 +77,12 @@ pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
     for by in 0..h2 as usize {
         sums.fill((0.0, 0));
         for row in v[by * f * w..(by + 1) * f * w].chunks_exact(w) {
+            // A literal block width lets the compiler unroll each block's loop.
             match f {
-                2 => add_blocks::<2>(row, &mut sums),
-                3 => add_blocks::<3>(row, &mut sums),
-                4 => add_blocks::<4>(row, &mut sums),
-                _ => {
-                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(f)) {
-                        add_block(block, s);
-                    }
-                }
+                2 => add_blocks(row, 2, &mut sums),
+                3 => add_blocks(row, 3, &mut sums),
+                4 => add_blocks(row, 4, &mut sums),
+                _ => add_blocks(row, f, &mut sums),
             }
         }
         data.extend(sums.iter().map(|&(s, n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN }));
@@ -93,20 +90,14 @@ pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
     *out = RangeImage::from_vec(w2, h2, data).expect("one value per block");
 }
 
-/// Adds each block of `F` values of `row` to its sum and count in `sums` (valid values only, left to right).
+/// Adds each block of `f` values of `row` to its sum and count in `sums` (valid values only, left to right).
 #[inline(always)]
-fn add_blocks<const F: usize>(row: &[f32], sums: &mut [(f64, u32)]) {
-    for (s, block) in sums.iter_mut().zip(row.chunks_exact(F)) {
-        add_block(block, s);
-    }
-}
-
-/// Adds the valid values of `block` to `s`, a sum and a count, left to right.
-#[inline(always)]
-fn add_block(block: &[f32], s: &mut (f64, u32)) {
-    for &x in block {
-        if x.is_finite() {
-            *s = (s.0 + f64::from(x), s.1 + 1);
+fn add_blocks(row: &[f32], f: usize, sums: &mut [(f64, u32)]) {
+    for (s, block) in sums.iter_mut().zip(row.chunks_exact(f)) {
+        for &x in block {
+            if x.is_finite() {
+                *s = (s.0 + f64::from(x), s.1 + 1);
+            }
         }
     }
 }
