@@ -4,8 +4,8 @@
 //! least-squares solutions are fixed linear filters: the plane slope is `a = Σu·z / Σu²`, `b = Σv·z / Σv²` and its
 //! mean `Σz / n` (then `c = mean − a·x₀ − b·y₀` with `(x₀, y₀)` the pixel's offset from the image centre); the
 //! quadratic's `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`, `c3 = Σp(u)·z / Σp(u)²` and
-//! `c5 = Σp(v)·z / Σp(v)²` with the centred `p(t) = t² − mean(t²)` (the gains come from faer's pseudo-inverse,
-//! [`SgKernels`]). These moments are separable: a row pass per input row (`Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`)
+//! `c5 = Σp(v)·z / Σp(v)²` with the centred `p(t) = t² − mean(t²)` (the gains come from the
+//! kernels' closed form, [`SgKernels`]). These moments are separable: a row pass per input row (`Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`)
 //! kept in a ring of `w` rows, then a column pass per output row, plus a column-first pass for the `v` kernels
 //! (`Σv·z`, `Σp(v)·z`, followed by a row box sum). Every kernel is written as a sum of **differences of nearby
 //! depths** (each tap relative to its row's or column's centre pixel), so the f32 arithmetic only rounds quantities
@@ -188,7 +188,7 @@ impl<'a> RowFitter<'a> {
         let r = window_px as usize / 2;
         let win = 2 * r + 1;
         let idx = |u: usize, v: usize| (v + r) * win + (u + r);
-        // Gains of the full-window kernels, read off faer's pseudo-inverse:
+        // Gains of the full-window kernels, read off the pseudo-inverse:
         // kernel of c1 at (1, 0) is 1/Σu²; of c2 at (0, 1) is 1/Σv²; of c4 at (1, 1) is 1/Σu²v²;
         // kernel of c3 is g3·p(u), and p(1) − p(0) = 1, so g3 = K3(1, 0) − K3(0, 0); likewise c5.
         let pv = &k.pinv;

@@ -3,7 +3,7 @@
 //! - [`fit_planes`]: least-squares plane `z = a·x + b·y + c` per pixel over the valid pixels of a `w × w` window,
 //!   x and y measured from the image centre.
 //! - [`compute`]: the [`SurfaceFeatures`] the later stages read: the plane, Gaussian and mean curvature (from the
-//!   derivatives of a least-squares quadratic, 2D Savitzky–Golay, kernels from faer's QR), curvedness and the
+//!   derivatives of a least-squares quadratic, 2D Savitzky–Golay, kernels in closed form), curvedness and the
 //!   windowed standard deviation of K. The principal curvatures follow from H and K
 //!   ([`SurfaceFeatures::principal`]).
 //! - [`compute_into`]: the same into the grids of a previous result, reusing their memory (frame streams).
@@ -522,31 +522,39 @@ mod tests {
     }
 
     #[test]
-    fn kernels_from_faer_are_savitzky_golay() {
-        // The 5×5 kernel of c1 is u / Σu² with Σu² = 50, and the kernels reproduce a quadratic exactly.
-        let k = quadratic::SgKernels::new(5);
-        for (i, p) in k.pinv.iter().enumerate() {
-            let u = (i % 5) as f64 - 2.0;
-            assert_relative_eq!(p[1], u / 50.0, epsilon = 1e-12);
+    fn kernels_are_the_least_squares_pseudo_inverse() {
+        // The 5×5 kernel of c1 is u / Σu² with Σu² = 50.
+        for (i, p) in quadratic::SgKernels::new(5).pinv.iter().enumerate() {
+            assert_relative_eq!(p[1], ((i % 5) as f64 - 2.0) / 50.0, epsilon = 1e-15);
         }
-        let coef = [1.0, 2.0, -3.0, 0.5, 0.25, -0.75];
-        for j in 0..6 {
-            let got: f64 = k
-                .pinv
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    let (u, v) = ((i % 5) as f64 - 2.0, (i / 5) as f64 - 2.0);
-                    let z = coef[0]
-                        + coef[1] * u
-                        + coef[2] * v
-                        + coef[3] * u * u
-                        + coef[4] * u * v
-                        + coef[5] * v * v;
-                    p[j] * z
-                })
-                .sum();
-            assert_relative_eq!(got, coef[j], epsilon = 1e-10);
+        for w in (3..=15u32).step_by(2) {
+            let k = quadratic::SgKernels::new(w);
+            let w = w as usize;
+            let r = (w / 2) as f64;
+            let at = |i: usize| quadratic::basis((i % w) as f64 - r, (i / w) as f64 - r);
+            assert_eq!(k.pinv.len(), w * w);
+            // A⁺A = I: a quadratic's coefficients come back exactly.
+            for j in 0..6 {
+                for m in 0..6 {
+                    let got: f64 = k.pinv.iter().enumerate().map(|(i, p)| p[j] * at(i)[m]).sum();
+                    let want = if j == m { 1.0 } else { 0.0 };
+                    assert!((got - want).abs() < 1e-12, "w {w}: (A⁺A)[{j}][{m}] = {got}");
+                }
+            }
+            // Least squares: the residual of any depth (here a fixed irregular one) is orthogonal to every column
+            // of A, so no other left inverse passes.
+            let z: Vec<f64> = (0..w * w).map(|i| ((i * 7919) % 101) as f64 * 0.37 - 11.0).collect();
+            let c: Vec<f64> = (0..6).map(|j| k.pinv.iter().zip(&z).map(|(p, z)| p[j] * z).sum()).collect();
+            for m in 0..6 {
+                let dot: f64 = (0..w * w)
+                    .map(|i| {
+                        let b = at(i);
+                        let fit: f64 = (0..6).map(|j| c[j] * b[j]).sum();
+                        (z[i] - fit) * b[m]
+                    })
+                    .sum();
+                assert!(dot.abs() < 1e-8, "w {w}: residual · column {m} = {dot}");
+            }
         }
     }
 

@@ -2,14 +2,10 @@
 //!
 //! The fit is `z = c0 + c1·u + c2·v + c3·u² + c4·u·v + c5·v²` in window coordinates `(u, v)` centred on the pixel.
 //! For a window whose pixels are all valid the coefficients are `c = A⁺ z` with the pseudo-inverse `A⁺` of the fixed
-//! design matrix `A`, computed once with faer's QR; the row engine ([`crate::fit`]) applies these kernels as
+//! design matrix `A`, in closed form ([`SgKernels::new`]); the row engine ([`crate::fit`]) applies these kernels as
 //! separable filters. A window with missing pixels (no data, or the image border) is fitted from its valid pixels
 //! alone by solving its own 6×6 normal equations ([`cholesky_solve`], square-root-free `LDLᵀ`); if they are singular (fewer than 6 valid
 //! pixels in general position) the pixel gets NaN. No-data pixels never enter a fit.
-
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::qr::no_pivoting::{factor, solve};
-use faer::{Mat, Par};
 
 /// The fixed part of the quadratic fit for one window size.
 #[derive(Debug, Clone)]
@@ -25,31 +21,37 @@ pub(crate) fn basis(u: f64, v: f64) -> [f64; 6] {
 }
 
 impl SgKernels {
-    /// Computes the kernels of a `window_px × window_px` window (odd, ≥ 3) with faer's QR (sequential).
+    /// Computes the kernels of a `window_px × window_px` window (odd, ≥ 3) in closed form.
+    ///
+    /// On a square window centred on the pixel the basis is orthogonal once `u²` and `v²` are centred: with
+    /// `m = mean(t²)` over `t = −r..=r`, `p(u) = u² − m` and `q(v) = v² − m`, the columns `1, u, v, p(u), uv, q(v)`
+    /// are pairwise orthogonal (every cross sum factors into a sum of an odd power, or of `p`, over one axis). Each
+    /// coefficient is then its column's projection: `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`,
+    /// `c3 = Σp(u)·z / Σp(u)²`, `c5 = Σq(v)·z / Σq(v)²`, and `c0 = mean(z) − m·(c3 + c5)` (the constant of `p` and
+    /// `q` given back). `Σt²` is exact; `m = r(r + 1)/3` and `Σ(t² − m)²` are rounded once each. The gains the row
+    /// engine reads ([`crate::fit`]) are bit for bit those of the QR pseudo-inverse (faer) this replaced, for every
+    /// window of 3–21 pixels; its two f64 plane gains differed from these in the last few bits (and between the axes).
     pub(crate) fn new(window_px: u32) -> Self {
         assert!(
             window_px >= 3 && !window_px.is_multiple_of(2),
             "quadratic window must be odd and ≥ 3, got {window_px}"
         );
         let w = window_px as usize;
-        let r = w / 2;
-        let n = w * w;
-        let off = |i: usize| ((i % w) as f64 - r as f64, (i / w) as f64 - r as f64);
-        let mut a = Mat::<f64>::from_fn(n, 6, |i, j| {
-            let (u, v) = off(i);
-            basis(u, v)[j]
-        });
-        let bs = factor::recommended_block_size::<f64>(n, 6);
-        let mut q = Mat::<f64>::zeros(bs, 6);
-        let req = factor::qr_in_place_scratch::<f64>(n, 6, bs, Par::Seq, Default::default())
-            .or(solve::solve_lstsq_in_place_scratch::<f64>(n, 6, bs, n, Par::Seq));
-        let mut mem = MemBuffer::new(req);
-        let stack = MemStack::new(&mut mem);
-        factor::qr_in_place(a.as_mut(), q.as_mut(), Par::Seq, stack, Default::default());
-        let mut rhs = Mat::<f64>::identity(n, n);
-        solve::solve_lstsq_in_place(a.as_ref(), q.as_ref(), a.as_ref(), rhs.as_mut(), Par::Seq, stack);
-        // The first 6 rows of the solution are A⁺.
-        let pinv: Vec<[f64; 6]> = (0..n).map(|i| std::array::from_fn(|j| rhs[(j, i)])).collect();
+        let r = (w / 2) as i64;
+        let n = (w * w) as f64;
+        let ts = || -r..=r;
+        // Per axis: Σt², the mean of t², and Σ(t² − m)²; over the window each sum is w times that of one axis.
+        let st2 = ts().map(|t| (t * t) as f64).sum::<f64>();
+        let m = st2 / w as f64;
+        let sp2 = ts().map(|t| ((t * t) as f64 - m).powi(2)).sum::<f64>();
+        let (s_u2, s_p2, s_u2v2) = (w as f64 * st2, w as f64 * sp2, st2 * st2);
+        let pinv = (0..w * w)
+            .map(|i| {
+                let (u, v) = ((i % w) as f64 - r as f64, (i / w) as f64 - r as f64);
+                let (k3, k5) = ((u * u - m) / s_p2, (v * v - m) / s_p2);
+                [1.0 / n - m * (k3 + k5), u / s_u2, v / s_u2, k3, u * v / s_u2v2, k5]
+            })
+            .collect();
         Self { pinv }
     }
 }
