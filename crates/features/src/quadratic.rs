@@ -28,9 +28,9 @@ impl SgKernels {
     /// are pairwise orthogonal (every cross sum factors into a sum of an odd power, or of `p`, over one axis). Each
     /// coefficient is then its column's projection: `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`,
     /// `c3 = Σp(u)·z / Σp(u)²`, `c5 = Σq(v)·z / Σq(v)²`, and `c0 = mean(z) − m·(c3 + c5)` (the constant of `p` and
-    /// `q` given back). `Σt²` is exact; `m = r(r + 1)/3` and `Σ(t² − m)²` are rounded once each. The gains the row
-    /// engine reads ([`crate::fit`]) are bit for bit those of the QR pseudo-inverse (faer) this replaced, for every
-    /// window of 3–21 pixels; its two f64 plane gains differed from these in the last few bits (and between the axes).
+    /// `q` given back). `Σt²` is exact; `m = r(r + 1)/3` and `Σ(t² − m)²` are rounded. The f32 gains the row engine
+    /// reads ([`crate::fit`]) are bit for bit those of the QR pseudo-inverse (faer) this replaced, for every window of
+    /// 3–21 pixels; faer's two f64 plane gains differed from these in the last few bits (and between the axes).
     pub(crate) fn new(window_px: u32) -> Self {
         assert!(
             window_px >= 3 && !window_px.is_multiple_of(2),
