@@ -4,8 +4,8 @@
 //! least-squares solutions are fixed linear filters: the plane slope is `a = Σu·z / Σu²`, `b = Σv·z / Σv²` and its
 //! mean `Σz / n` (then `c = mean − a·x₀ − b·y₀` with `(x₀, y₀)` the pixel's offset from the image centre); the
 //! quadratic's `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`, `c3 = Σp(u)·z / Σp(u)²` and
-//! `c5 = Σp(v)·z / Σp(v)²` with the centred `p(t) = t² − mean(t²)` (the gains come from the
-//! kernels' closed form, [`SgKernels`]). These moments are separable: a row pass per input row (`Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`)
+//! `c5 = Σp(v)·z / Σp(v)²` with the centred `p(t) = t² − mean(t²)` (the gains come from the kernels' closed form,
+//! [`SgKernels`]). These moments are separable: a row pass per input row (`Σu·z`, `Σp(u)·z`, `Σ(z − z_centre)`)
 //! kept in a ring of `w` rows, then a column pass per output row, plus a column-first pass for the `v` kernels
 //! (`Σv·z`, `Σp(v)·z`, followed by a row box sum). Every kernel is written as a sum of **differences of nearby
 //! depths** (each tap relative to its row's or column's centre pixel), so the f32 arithmetic only rounds quantities
@@ -30,7 +30,7 @@
 use std::sync::OnceLock;
 
 use crate::plane;
-use crate::quadratic::{SgKernels, basis, cholesky_solve, cholesky_solve_lanes};
+use crate::quadratic::{SgKernels, basis, cholesky_solve, cholesky_solve_lanes, mean_t2};
 
 /// One row of the quadratic fit's derivatives, one array per derivative: `[Ix, Iy, Ixx, Ixy, Iyy]` (structure of
 /// arrays, so that the fast path's stores and the curvatures' loads vectorise without shuffles).
@@ -201,8 +201,8 @@ impl<'a> RowFitter<'a> {
             1.0 / (win * win) as f32,
         ];
         let plane_gains = [pv[idx(1, 0)][1], pv[idx(0, 1)][2], 1.0 / (win * win) as f64];
-        let mean_t2 = (r * (r + 1)) as f64 / 3.0;
-        let p = (0..=r).map(|t| ((t * t) as f64 - mean_t2) as f32).collect();
+        let mt2 = mean_t2(r);
+        let p = (0..=r).map(|t| ((t * t) as f64 - mt2) as f32).collect();
         let bas: Vec<[f64; 6]> =
             (0..win * win).map(|t| basis((t % win) as f64 - r as f64, (t / win) as f64 - r as f64)).collect();
         let outer: Vec<[f64; 21]> = bas

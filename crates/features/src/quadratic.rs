@@ -20,6 +20,12 @@ pub(crate) fn basis(u: f64, v: f64) -> [f64; 6] {
     [1.0, u, v, u * u, u * v, v * v]
 }
 
+/// The mean of `t²` over the offsets `t = −r..=r` of a window's row: `r(r + 1)/3`, the constant that centres `u²`
+/// and `v²` (one rounding).
+pub(crate) fn mean_t2(r: usize) -> f64 {
+    (r * (r + 1)) as f64 / 3.0
+}
+
 impl SgKernels {
     /// Computes the kernels of a `window_px × window_px` window (odd, ≥ 3) in closed form.
     ///
@@ -28,7 +34,7 @@ impl SgKernels {
     /// are pairwise orthogonal (every cross sum factors into a sum of an odd power, or of `p`, over one axis). Each
     /// coefficient is then its column's projection: `c1 = Σu·z / Σu²`, `c2 = Σv·z / Σv²`, `c4 = Σuv·z / Σu²v²`,
     /// `c3 = Σp(u)·z / Σp(u)²`, `c5 = Σq(v)·z / Σq(v)²`, and `c0 = mean(z) − m·(c3 + c5)` (the constant of `p` and
-    /// `q` given back). `Σt²` is exact; `m = r(r + 1)/3` and `Σ(t² − m)²` are rounded. The f32 gains the row engine
+    /// `q` given back). `Σt²` is exact; `m` ([`mean_t2`]) and `Σ(t² − m)²` are rounded. The f32 gains the row engine
     /// reads ([`crate::fit`]) are bit for bit those of the QR pseudo-inverse (faer) this replaced, for every window of
     /// 3–21 pixels; faer's two f64 plane gains differed from these in the last few bits (and between the axes).
     pub(crate) fn new(window_px: u32) -> Self {
@@ -42,7 +48,7 @@ impl SgKernels {
         let ts = || -r..=r;
         // Per axis: Σt², the mean of t², and Σ(t² − m)²; over the window each sum is w times that of one axis.
         let st2 = ts().map(|t| (t * t) as f64).sum::<f64>();
-        let m = st2 / w as f64;
+        let m = mean_t2(w / 2);
         let sp2 = ts().map(|t| ((t * t) as f64 - m).powi(2)).sum::<f64>();
         let (s_u2, s_p2, s_u2v2) = (w as f64 * st2, w as f64 * sp2, st2 * st2);
         let pinv = (0..w * w)
