@@ -13,6 +13,12 @@
 //!   and their frames run at full resolution.
 //! - **Blocks.** The mean of a block's valid values (no data if it has none); the last `w mod f` columns and `h mod
 //!   f` rows join no block, and come back as the nearest block's.
+//! - **Blocks across a jump.** A block that straddles a depth jump (a door set into its wall, an object before a
+//!   wall) would average the two surfaces into a ramp between them, over which region growing joins them. So a block
+//!   whose `f²` values no plane explains, its plane-fit RMS above [`MIXED_BLOCK_SCALES`] times the median of the
+//!   frame's blocks (at least the noise floor of a quantised or noise-free frame), is no data
+//!   ([`downsample_across_jumps_into`], for `f ≥ 3`): the stages see a gap there, and its pixels come back to the
+//!   regions on either side by their planes.
 //! - **Back to full resolution.** Each valid pixel takes, among the final regions of the 3 × 3 blocks around its own,
 //!   the one whose plane lies nearest to its 3D point, if that plane explains it within the final segmentation's fill
 //!   limit, `max(segment.fill_max_residual, segment.fill_rms_ratio × RMS)`, times `f` (a block's mean of `f²` values
@@ -65,6 +71,75 @@ pub fn size(range: &RangeImage, f: u32) -> (u32, u32) {
 /// # Panics
 /// If `f` is 0 or larger than a side of `range`.
 pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
+    downsample(range, f, out, None);
+}
+
+/// How far above the frame's typical misfit a block's plane-fit RMS lies when [`downsample_across_jumps_into`] takes
+/// it for a block across a depth jump: a multiple of the median RMS of the frame's blocks (their noise and rounding).
+/// On the NYU frames 5–14 gave the same gains (docs/method.md §2.7).
+pub const MIXED_BLOCK_SCALES: f64 = 8.0;
+
+/// [`downsample_across_jumps_into`] reads the median misfit on every this-many-th block (a Kinect frame at `f` = 3:
+/// about 4,300 of 34,000).
+const MEDIAN_STRIDE: usize = 8;
+
+/// [`downsample_across_jumps_into`] reads the smallest difference between neighbours on every this-many-th row.
+const FLOOR_ROW_STRIDE: usize = 16;
+
+/// [`downsample_into`], then the blocks whose values straddle a depth jump set to no data (module docs): those with
+/// every value valid whose least-squares plane (depth as an affine function of the pixel, over the block) leaves an
+/// RMS residual above [`MIXED_BLOCK_SCALES`] times the median of that RMS over all such blocks, or times the noise
+/// floor of `range` seen through `camera` if that is larger (the rounding error `q / √12` of its smallest difference
+/// between neighbours `q`, or a tenth of its pixel pitch in its depth units, as `crate::units` floors σ). Blocks with
+/// no data among their values keep their means. `scratch` holds the blocks' mean square residuals. Returns the number
+/// of blocks set to
+/// no data: none for `f` < 3, since a 2 × 2 block's plane fits a jump between its columns or rows exactly.
+///
+/// # Panics
+/// If `f` is 0 or larger than a side of `range`.
+pub fn downsample_across_jumps_into(
+    range: &RangeImage,
+    camera: &Camera,
+    f: u32,
+    out: &mut RangeImage,
+    scratch: &mut Vec<f64>,
+) -> usize {
+    if f < 3 {
+        downsample(range, f, out, None);
+        return 0;
+    }
+    downsample(range, f, out, Some(&mut *scratch));
+    let blocks = scratch.len();
+    // The median RMS of the blocks with every value valid (the others' RMS is NaN), on every
+    // MEDIAN_STRIDE-th block.
+    for i in (0..blocks).step_by(MEDIAN_STRIDE) {
+        if scratch[i].is_finite() {
+            scratch.push(scratch[i]);
+        }
+    }
+    let full = scratch.len() - blocks;
+    if full == 0 {
+        return 0;
+    }
+    // Compared as squares: the mean squares' median is the squared RMS's.
+    let (_, &mut median, _) = scratch[blocks..].select_nth_unstable_by((full - 1) / 2, f64::total_cmp);
+    let limit = MIXED_BLOCK_SCALES * median.max(0.0).sqrt().max(noise_floor(range, camera));
+    if !(limit > 0.0 && limit.is_finite()) {
+        return 0;
+    }
+    let limit2 = limit * limit;
+    let mut dropped = 0;
+    for (value, &ms) in out.as_mut_slice().iter_mut().zip(&scratch[..blocks]) {
+        if ms > limit2 {
+            *value = f32::NAN;
+            dropped += 1;
+        }
+    }
+    dropped
+}
+
+/// [`downsample_into`], where `misfits` is also given each block's plane-fit mean square residual ([`block_misfits`]).
+fn downsample(range: &RangeImage, f: u32, out: &mut RangeImage, misfits: Option<&mut Vec<f64>>) {
     let (w2, h2) = size(range, f);
     assert!(f > 0 && w2 > 0 && h2 > 0, "cannot decimate a {}×{} frame by {f}", range.width(), range.height());
     let (w, f) = (range.width() as usize, f as usize);
@@ -88,6 +163,9 @@ pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
         data.extend(sums.iter().map(|&(s, n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN }));
     }
     *out = RangeImage::from_vec(w2, h2, data).expect("one value per block");
+    if let Some(misfits) = misfits {
+        block_misfits(range, f, misfits);
+    }
 }
 
 /// Adds each block of `f` values of `row` to its sum and count in `sums` (valid values only, left to right).
@@ -100,6 +178,74 @@ fn add_blocks(row: &[f32], f: usize, sums: &mut [(f64, u32)]) {
             }
         }
     }
+}
+
+/// Each `f × f` block's plane-fit mean square residual (depth as an affine function of the pixel; the squared
+/// residuals over `f²` − 3 degrees of freedom) into `out` (cleared first), in the order of the blocks; NaN where a
+/// value of the block is missing.
+fn block_misfits(range: &RangeImage, f: usize, out: &mut Vec<f64>) {
+    // A literal block width lets the compiler unroll the loops over a block.
+    match f {
+        3 => block_misfits_of(range, 3, out),
+        4 => block_misfits_of(range, 4, out),
+        _ => block_misfits_of(range, f, out),
+    }
+}
+
+/// [`block_misfits`]' body. Per block row, the values less their block's centre value, `d`, are summed down each
+/// column (`Σd`, `Σd²`, `Σy·d`, in `f32`: the differences within a block are small), then across each block.
+#[inline(always)]
+fn block_misfits_of(range: &RangeImage, f: usize, out: &mut Vec<f64>) {
+    let (w2, h2) = size(range, f as u32);
+    let (w, cols, h2) = (range.width() as usize, w2 as usize * f, h2 as usize);
+    let v = range.as_slice();
+    let (n, centre) = ((f * f) as f64, (f as f64 - 1.0) / 2.0);
+    // Σx² = Σy² over a block in centred pixel coordinates (Σx = Σy = Σxy = 0).
+    let (inv_n, inv_sxx, inv_dof) = (1.0 / n, 12.0 / (n * (n - 1.0)), 1.0 / (n - 3.0));
+    // Per column of the whole blocks: its block's centre value, then Σd, Σd² and Σy·d down the block row.
+    let mut reference = vec![0.0f32; cols];
+    let (mut s, mut ss, mut sy) = (vec![0.0f32; cols], vec![0.0f32; cols], vec![0.0f32; cols]);
+    out.clear();
+    out.reserve(w2 as usize * h2);
+    for by in 0..h2 {
+        let rows = &v[by * f * w..(by + 1) * f * w];
+        for (r, m) in reference.chunks_exact_mut(f).zip(rows[(f / 2) * w..][..cols].chunks_exact(f)) {
+            r.fill(m[f / 2]);
+        }
+        for dy in 0..f {
+            let (row, y) = (&rows[dy * w..][..cols], (dy as f64 - centre) as f32);
+            let (s, ss, sy, reference) =
+                (&mut s[..cols], &mut ss[..cols], &mut sy[..cols], &reference[..cols]);
+            for x in 0..cols {
+                let d = row[x] - reference[x];
+                (s[x], ss[x], sy[x]) =
+                    if dy == 0 { (d, d * d, y * d) } else { (s[x] + d, ss[x] + d * d, sy[x] + y * d) };
+            }
+        }
+        for ((s, ss), sy) in s.chunks_exact(f).zip(ss.chunks_exact(f)).zip(sy.chunks_exact(f)) {
+            let (mut sum, mut sum2, mut sumx, mut sumy) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            for dx in 0..f {
+                let x = dx as f64 - centre;
+                sum += f64::from(s[dx]);
+                sum2 += f64::from(ss[dx]);
+                sumx += x * f64::from(s[dx]);
+                sumy += f64::from(sy[dx]);
+            }
+            out.push((sum2 - sum * sum * inv_n - (sumx * sumx + sumy * sumy) * inv_sxx) * inv_dof);
+        }
+    }
+}
+
+/// The smallest σ `range` seen through `camera` has in its own depth units, as `crate::units` floors it: the rounding
+/// error `q / √12` of its smallest difference between neighbours `q` (its step, if it has one), or a tenth of its pixel
+/// pitch, whichever is larger (0 without either).
+fn noise_floor(range: &RangeImage, camera: &Camera) -> f64 {
+    let rounding =
+        planefit::noise::smallest_difference(range, FLOOR_ROW_STRIDE).map_or(0.0, |q| q / 12f64.sqrt());
+    // The pitch in depth units: the 3D pitch over the 3D length of one unit of depth.
+    let pitch = planefit::noise::step_geometry(range, camera, 1.0)
+        .map_or(0.0, |(unit, pitch)| crate::units::PINHOLE_PITCH_SHARE * pitch / unit);
+    rounding.max(pitch)
 }
 
 /// `coarse` (a map of the frame decimated by `f`) back at the frame's size `(w, h)` into `out`: each pixel takes
@@ -373,6 +519,63 @@ mod tests {
         assert_eq!(small.dimensions(), (2, 1));
         assert_eq!(small[(0, 0)], 4.0);
         assert!(small[(1, 0)].is_nan(), "a block without data has none");
+    }
+
+    /// [`PINHOLE`]'s view of a slanted plane 1.5–2.5 m away, in millimetres, with a step of `jump` mm toward the
+    /// sensor from column `edge` on and uniform noise of ±`noise` mm (seeded).
+    fn stepped_plane(edge: u32, jump: f64, noise: f64) -> RangeImage {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
+        let (n, d) = ([0.3, -0.2, 0.9327379], 2.0);
+        Grid::from_fn(96, 72, |x, y| {
+            let z = plane_depth(n, d, f64::from(x), f64::from(y)) - if x >= edge { jump } else { 0.0 };
+            (z + noise * (2.0 * rng.random::<f64>() - 1.0)) as f32
+        })
+    }
+
+    #[test]
+    fn blocks_across_a_jump_are_no_data_and_the_others_keep_their_means() {
+        let mut misfits = Vec::new();
+        // A jump of 40 mm (the noise ±1 mm) inside the blocks of columns 30–32: each of them is no data, and every
+        // other block keeps its mean bit for bit.
+        let range = stepped_plane(31, 40.0, 1.0);
+        let (mut means, mut split) = (RangeImage::default(), RangeImage::default());
+        downsample_into(&range, 3, &mut means);
+        let dropped = downsample_across_jumps_into(&range, &PINHOLE, 3, &mut split, &mut misfits);
+        assert_eq!(dropped, 72 / 3);
+        for (i, j, &v) in split.enumerate() {
+            if i == 10 {
+                assert!(v.is_nan(), "block ({i}, {j}) straddles the jump");
+            } else {
+                assert_eq!(v.to_bits(), means[(i, j)].to_bits(), "block ({i}, {j})");
+            }
+        }
+        // The same jump between two columns of blocks, a jump of 2 mm inside them, or blocks of 2 × 2 pixels (whose
+        // plane fits a jump between their columns): no block is dropped.
+        for (edge, jump, f) in [(30, 40.0, 3), (31, 2.0, 3), (31, 40.0, 2)] {
+            let range = stepped_plane(edge, jump, 1.0);
+            downsample_into(&range, f, &mut means);
+            assert_eq!(downsample_across_jumps_into(&range, &PINHOLE, f, &mut split, &mut misfits), 0);
+            assert!(split.as_slice().iter().zip(means.as_slice()).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+    }
+
+    #[test]
+    fn the_noise_floor_keeps_creases_and_risers_of_noise_free_depth() {
+        let (mut split, mut misfits) = (RangeImage::default(), Vec::new());
+        // Noise-free depth creased along column 31 (the slanted plane, 1 mm more a column away from it): the blocks
+        // fit their planes to the curvature of perspective depth, well under a micrometre, and only the floor (a
+        // tenth of the 4 mm pitch) keeps the crease's blocks, which no jump crosses.
+        let plane = stepped_plane(96, 0.0, 0.0);
+        let crease = Grid::from_fn(96, 72, |x, y| plane[(x, y)] + (x as f32 - 31.0).abs());
+        assert_eq!(downsample_across_jumps_into(&crease, &PINHOLE, 3, &mut split, &mut misfits), 0);
+        // Whole millimetres: a level wall, then from column 31 on, 40 mm nearer, a floor rising 1 mm every 10
+        // columns. Most blocks hold one value (a median misfit of 0); the rounding error of 1 mm keeps the risers'
+        // blocks, and the jump's go.
+        let depth = |x: u32| if x < 31 { 2000.0 } else { (1960.0 - 0.1 * (x as f32 - 31.0)).round() };
+        let rounded = Grid::from_fn(96, 72, |x, _| depth(x));
+        assert_eq!(downsample_across_jumps_into(&rounded, &PINHOLE, 3, &mut split, &mut misfits), 72 / 3);
+        assert!(split.enumerate().all(|(i, _, v)| v.is_nan() == (i == 10)));
     }
 
     #[test]

@@ -142,6 +142,8 @@ struct Decimated {
     edges: EdgeMap,
     /// [`crate::decimate::renumber`]'s working memory.
     map: Vec<u32>,
+    /// [`crate::decimate::downsample_across_jumps_into`]'s working memory.
+    misfits: Vec<f64>,
 }
 
 /// Frames decimated to fewer blocks than this on a side run at full resolution.
@@ -252,7 +254,10 @@ impl Segmenter {
             Some(coarse_camera) => {
                 let t = Instant::now();
                 let mut small = std::mem::take(&mut self.scratch.decimated.range);
-                crate::decimate::downsample_into(range, f, &mut small);
+                let misfits = &mut self.scratch.decimated.misfits;
+                let dropped =
+                    crate::decimate::downsample_across_jumps_into(range, camera, f, &mut small, misfits);
+                tracing::debug!(dropped, "blocks across depth jumps");
                 let t_down = elapsed_ms(t);
                 self.run(&small, &coarse_camera, Some(Full { range, factor: f, t_down }));
                 self.scratch.decimated.range = small;
