@@ -13,10 +13,10 @@
 //!   and their frames run at full resolution.
 //! - **Blocks.** The mean of a block's valid values (no data if it has none); the last `w mod f` columns and `h mod
 //!   f` rows join no block, and come back as the nearest block's.
-//! - **Blocks across a jump.** A block that straddles a depth jump (a door set into its wall, an object before a
-//!   wall) would average the two surfaces into a ramp between them, over which region growing joins them. So a block
-//!   whose `f²` values no plane explains, its plane-fit RMS above [`MIXED_BLOCK_SCALES`] times the median of the
-//!   frame's blocks (at least the noise floor of a quantised or noise-free frame), is no data
+//! - **Blocks across a jump.** A block that straddles a depth jump (an object before a wall, a wall before
+//!   another) would average the two surfaces into a ramp between them, over which region growing joins them. So a
+//!   block whose `f²` values no plane explains, its plane-fit RMS above [`MIXED_BLOCK_SCALES`] times the median of
+//!   the frame's blocks (at least the noise floor of a quantised or noise-free frame), is no data
 //!   ([`downsample_across_jumps_into`], for `f ≥ 3`): the stages see a gap there, and its pixels come back to the
 //!   regions on either side by their planes.
 //! - **Back to full resolution.** Each valid pixel takes, among the final regions of the 3 × 3 blocks around its own,
