@@ -76,7 +76,7 @@ pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
 
 /// How far above the frame's typical misfit a block's plane-fit RMS lies when [`downsample_across_jumps_into`] takes
 /// it for a block across a depth jump: a multiple of the median RMS of the frame's blocks (their noise and rounding).
-/// On the NYU frames 5–14 gave the same gains (docs/method.md §2.7).
+/// On the NYU frames 5–12 gave the same gains within the seeds' spread (docs/results.md).
 pub const MIXED_BLOCK_SCALES: f64 = 8.0;
 
 /// [`downsample_across_jumps_into`] reads the median misfit on every this-many-th block (a Kinect frame at `f` = 3:
@@ -88,12 +88,12 @@ const FLOOR_ROW_STRIDE: usize = 16;
 
 /// [`downsample_into`], then the blocks whose values straddle a depth jump set to no data (module docs): those with
 /// every value valid whose least-squares plane (depth as an affine function of the pixel, over the block) leaves an
-/// RMS residual above [`MIXED_BLOCK_SCALES`] times the median of that RMS over all such blocks, or times the noise
-/// floor of `range` seen through `camera` if that is larger (the rounding error `q / √12` of its smallest difference
-/// between neighbours `q`, or a tenth of its pixel pitch in its depth units, as `crate::units` floors σ). Blocks with
-/// no data among their values keep their means. `scratch` holds the blocks' mean square residuals. Returns the number
-/// of blocks set to
-/// no data: none for `f` < 3, since a 2 × 2 block's plane fits a jump between its columns or rows exactly.
+/// RMS residual above [`MIXED_BLOCK_SCALES`] times the median of that RMS (read on every 8th such block), or times
+/// the noise floor of `range` seen through `camera` if that is larger (the rounding error `q / √12` of its smallest
+/// difference between neighbours `q`, or a tenth of its pixel pitch in its depth units, as `crate::units` floors σ).
+/// Blocks with no data among their values keep their means. `scratch` holds the blocks' mean square residuals.
+/// Returns the number of blocks set to no data: none for `f` < 3, since a 2 × 2 block's plane fits a jump between its
+/// columns or rows exactly.
 ///
 /// # Panics
 /// If `f` is 0 or larger than a side of `range`.
