@@ -71,7 +71,29 @@ pub fn size(range: &RangeImage, f: u32) -> (u32, u32) {
 /// # Panics
 /// If `f` is 0 or larger than a side of `range`.
 pub fn downsample_into(range: &RangeImage, f: u32, out: &mut RangeImage) {
-    downsample(range, f, out, None);
+    let (w2, h2) = size(range, f);
+    assert!(f > 0 && w2 > 0 && h2 > 0, "cannot decimate a {}×{} frame by {f}", range.width(), range.height());
+    let (w, f) = (range.width() as usize, f as usize);
+    let v = range.as_slice();
+    let mut data = std::mem::take(out).into_vec();
+    data.clear();
+    data.reserve(w2 as usize * h2 as usize);
+    // Per block of the row: the sum of its valid values and their count.
+    let mut sums = vec![(0.0f64, 0u32); w2 as usize];
+    for by in 0..h2 as usize {
+        sums.fill((0.0, 0));
+        for row in v[by * f * w..(by + 1) * f * w].chunks_exact(w) {
+            // A literal block width lets the compiler unroll each block's loop.
+            match f {
+                2 => add_blocks(row, 2, &mut sums),
+                3 => add_blocks(row, 3, &mut sums),
+                4 => add_blocks(row, 4, &mut sums),
+                _ => add_blocks(row, f, &mut sums),
+            }
+        }
+        data.extend(sums.iter().map(|&(s, n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN }));
+    }
+    *out = RangeImage::from_vec(w2, h2, data).expect("one value per block");
 }
 
 /// How far above the frame's typical misfit a block's plane-fit RMS lies when [`downsample_across_jumps_into`] takes
@@ -104,11 +126,11 @@ pub fn downsample_across_jumps_into(
     out: &mut RangeImage,
     scratch: &mut Vec<f64>,
 ) -> usize {
+    downsample_into(range, f, out);
     if f < 3 {
-        downsample(range, f, out, None);
         return 0;
     }
-    downsample(range, f, out, Some(&mut *scratch));
+    block_misfits(range, f as usize, scratch);
     let blocks = scratch.len();
     // The median RMS of the blocks with every value valid (the others' RMS is NaN), on every
     // MEDIAN_STRIDE-th block.
@@ -136,36 +158,6 @@ pub fn downsample_across_jumps_into(
         }
     }
     dropped
-}
-
-/// [`downsample_into`], where `misfits` is also given each block's plane-fit mean square residual ([`block_misfits`]).
-fn downsample(range: &RangeImage, f: u32, out: &mut RangeImage, misfits: Option<&mut Vec<f64>>) {
-    let (w2, h2) = size(range, f);
-    assert!(f > 0 && w2 > 0 && h2 > 0, "cannot decimate a {}×{} frame by {f}", range.width(), range.height());
-    let (w, f) = (range.width() as usize, f as usize);
-    let v = range.as_slice();
-    let mut data = std::mem::take(out).into_vec();
-    data.clear();
-    data.reserve(w2 as usize * h2 as usize);
-    // Per block of the row: the sum of its valid values and their count.
-    let mut sums = vec![(0.0f64, 0u32); w2 as usize];
-    for by in 0..h2 as usize {
-        sums.fill((0.0, 0));
-        for row in v[by * f * w..(by + 1) * f * w].chunks_exact(w) {
-            // A literal block width lets the compiler unroll each block's loop.
-            match f {
-                2 => add_blocks(row, 2, &mut sums),
-                3 => add_blocks(row, 3, &mut sums),
-                4 => add_blocks(row, 4, &mut sums),
-                _ => add_blocks(row, f, &mut sums),
-            }
-        }
-        data.extend(sums.iter().map(|&(s, n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN }));
-    }
-    *out = RangeImage::from_vec(w2, h2, data).expect("one value per block");
-    if let Some(misfits) = misfits {
-        block_misfits(range, f, misfits);
-    }
 }
 
 /// Adds each block of `f` values of `row` to its sum and count in `sums` (valid values only, left to right).
