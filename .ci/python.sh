@@ -11,7 +11,7 @@ rm -rf "$VENV"
 # Pinned test dependencies (Ray Data and its Arrow): one resolver run, wheels only.
 "$VENV/bin/pip" install --quiet --only-binary=:all: \
     "numpy==2.4.6" "pytest==9.2.0" "ray[data]==2.60.0" "pyarrow==26.0.1"
-# The package itself, built once by maturin (release profile, shared target/ with cargo).
+# The package itself, built by maturin (release profile: CI's one release build, in target/ like cargo's).
 "$VENV/bin/pip" install --quiet .
 export RANGESEG_REQUIRE_RAY=1
 # The CLI the tests compare with: the one `cargo test` built just before (else conftest builds it with cargo).
