@@ -555,6 +555,14 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "segment.small_face_max_slant_deg",
         "Largest angle between a small face's normal and the line of sight.",
     ),
+    (
+        "segment.small_face_grow_px",
+        "A small face then takes, out to this many pixels from it, its neighbours' pixels that its plane explains better than their own (0 = off).",
+    ),
+    (
+        "segment.small_face_grow_margin",
+        "How much nearer such a pixel lies to the face's plane than to its own region's, in noise scales.",
+    ),
 ];
 
 /// The comment of `key` (`table.key`) in [`KEY_DOCS`].

@@ -7,6 +7,10 @@
 //! unlabelled: a terrace of a quantised slope (within a few noise scales of the slope's plane), the mixed pixels of a
 //! jump (a "plane" seen almost edge-on), a dent or an object on one surface (enclosed by that surface alone), a line
 //! of pixels (any plane through it fits).
+//!
+//! A face's pixels that the fill gave a neighbour before the face existed (they lay within the fill limit of the
+//! neighbour's plane) come back to it: ring by ring out from the group, a pixel of a region beside it moves to the face
+//! when the face's plane explains it within the noise and better than its own region's plane does.
 
 use crate::Scene;
 use crate::plane::{Plane, fit_plane, mean_sq_residual};
@@ -45,6 +49,10 @@ pub(crate) struct Buffers {
     core: Vec<u32>,
     /// The merged groups (roots) of the regions beside the group.
     beside: Vec<u32>,
+    /// The faces made, in order: their label, noise scale and the end of their group's pixels in `face_px`.
+    made: Vec<(u32, f64, usize)>,
+    /// The pixels of the faces' groups, one face after the other.
+    face_px: Vec<u32>,
 }
 
 /// The limits of [`recover`] (the `small_face_*` parameters and `min_region_px`).
@@ -61,14 +69,18 @@ pub(crate) struct Limits {
     pub(crate) min_gap: f64,
     /// Largest angle, in degrees, between the face's normal and the line of sight at its centroid.
     pub(crate) max_slant_deg: f64,
+    /// How many rings of pixels out from its group a face may take from the regions beside it (0: none).
+    pub(crate) grow_px: usize,
+    /// How much nearer to the face's plane than to its own region's plane a pixel it takes lies, in noise scales.
+    pub(crate) grow_margin: f64,
 }
 
 /// Makes a new region of each 4-connected group of valid unlabelled pixels of `comp` that is a face by [`Limits`]
 /// and the constants above. `comp` holds a label per pixel whose merged group's root in `parent` indexes `planes`
 /// (at `root − 1`); `parent`, `moments`, `planes` and `guide` grow by one entry per face (its own root, the moments
 /// and plane of the pixels that fit it, no region-growing label). Groups are found in raster order of their first
-/// pixel and their sums taken in raster order, so the result does not depend on the flood fill's path. Returns the
-/// number of faces made.
+/// pixel and their sums taken in raster order, so the result does not depend on the flood fill's path. Then each face,
+/// in the order made, takes back its pixels from the regions beside it ([`grow`]). Returns the number of faces made.
 pub(crate) fn recover(
     scene: &Scene<'_>,
     comp: &mut [u32],
@@ -77,10 +89,10 @@ pub(crate) fn recover(
     bufs: &mut Buffers,
 ) -> usize {
     let (w, h) = (scene.w, scene.h);
-    let Buffers { left, stack, group, inliers, ranked, trimmed, core, beside } = bufs;
+    let Buffers { left, stack, group, inliers, ranked, trimmed, core, beside, made: faces, face_px } = bufs;
     // Room for every pixel once, reserved once, so later frames reuse the memory; the trimmed fit sees only groups
     // under the size limit.
-    for v in [&mut *left, &mut *stack, &mut *group, &mut *core] {
+    for v in [&mut *left, &mut *stack, &mut *group, &mut *core, &mut *face_px] {
         v.clear();
         v.reserve(w * h);
     }
@@ -90,8 +102,10 @@ pub(crate) fn recover(
     }
     ranked.clear();
     ranked.reserve(limits.max_px);
+    faces.clear();
     let valid = |j: usize| scene.range[j].is_finite();
-    let mut made = 0;
+    // Labels from here on are faces.
+    let first_face = planes.len() as u32 + 1;
     for s in 0..w * h {
         if comp[s] != 0 || !valid(s) {
             continue;
@@ -138,7 +152,7 @@ pub(crate) fn recover(
             }
         }
         match face(scene, (group, core), beside, planes, limits, (inliers, ranked, trimmed)) {
-            Some((plane, m)) => {
+            Some((plane, m, sigma)) => {
                 planes.push(plane);
                 moments.push(m);
                 guide.push(0);
@@ -147,7 +161,8 @@ pub(crate) fn recover(
                 for &i in group.iter() {
                     comp[i as usize] = label;
                 }
-                made += 1;
+                face_px.extend_from_slice(group);
+                faces.push((label, sigma, face_px.len()));
             }
             None => left.extend_from_slice(group),
         }
@@ -155,7 +170,80 @@ pub(crate) fn recover(
     for &i in left.iter() {
         comp[i as usize] = 0;
     }
-    made
+    if limits.grow_px > 0 {
+        let taken = grow(
+            scene,
+            comp,
+            (&mut parent[..], &planes[..], first_face),
+            limits,
+            (faces, face_px),
+            (stack, group),
+        );
+        tracing::debug!(faces = faces.len(), taken, "small faces grown");
+    }
+    faces.len()
+}
+
+/// Grows each face of `faces` (label, noise scale σ, end of its group's pixels in `face_px`), in that order: ring
+/// after ring, out to `limits.grow_px` rings from its group, a 4-neighbour of the face's last ring that a region holds
+/// (a label below `first_face`, whose merged group's root in `parent` indexes `planes`) joins the face when the face's
+/// plane lies within `limits.scales` σ of it and nearer than its own region's plane by `limits.grow_margin` σ. The test
+/// reads those two planes alone, never the labels around the pixel, so a ring does not depend on the order its pixels
+/// are visited in; no face takes from another. `ring` and `next` are working memory. Returns the pixels moved.
+fn grow(
+    scene: &Scene<'_>,
+    comp: &mut [u32],
+    (parent, planes, first_face): (&mut [u32], &[Plane], u32),
+    limits: Limits,
+    (faces, face_px): (&[(u32, f64, usize)], &[u32]),
+    (ring, next): (&mut Vec<u32>, &mut Vec<u32>),
+) -> usize {
+    let (w, h) = (scene.w, scene.h);
+    let mut taken = 0;
+    let mut start = 0;
+    for &(label, sigma, end) in faces {
+        let plane = planes[label as usize - 1];
+        let reach = limits.scales * sigma;
+        let margin = limits.grow_margin * sigma;
+        ring.clear();
+        ring.extend_from_slice(&face_px[start..end]);
+        start = end;
+        for _ in 0..limits.grow_px {
+            next.clear();
+            for &i in ring.iter() {
+                let i = i as usize;
+                let (x, y) = (i % w, i / w);
+                for (ok, j) in [
+                    (x > 0, i.wrapping_sub(1)),
+                    (x + 1 < w, i + 1),
+                    (y > 0, i.wrapping_sub(w)),
+                    (y + 1 < h, i + w),
+                ] {
+                    let l = if ok { comp[j] } else { 0 };
+                    // Unlabelled, or a face's (this one's included).
+                    if l == 0 || l >= first_face {
+                        continue;
+                    }
+                    let own = find(parent, l);
+                    if own >= first_face {
+                        continue;
+                    }
+                    let p = scene.points[j];
+                    let d = plane.residual(p);
+                    if d <= reach && d + margin < planes[own as usize - 1].residual(p) {
+                        comp[j] = label;
+                        next.push(j as u32);
+                    }
+                }
+            }
+            if next.is_empty() {
+                break;
+            }
+            taken += next.len();
+            std::mem::swap(ring, next);
+        }
+    }
+    taken
 }
 
 /// Whether the gathered `group` (`core`, its pixels with their four neighbours in it; `beside`, the roots of the
@@ -169,7 +257,7 @@ fn face(
     planes: &[Plane],
     limits: Limits,
     (inliers, ranked, trimmed): (&mut Vec<u32>, &mut Vec<(f64, u32)>, &mut Vec<u32>),
-) -> Option<(Plane, Moments)> {
+) -> Option<(Plane, Moments, f64)> {
     let n = group.len();
     if n < limits.min_px
         || n >= limits.max_px
@@ -239,7 +327,8 @@ fn face(
         seen_from,
         "small face candidate"
     );
-    (seen_from >= limits.max_slant_deg.to_radians().cos() && gap > limits.min_gap).then_some((plane, m))
+    (seen_from >= limits.max_slant_deg.to_radians().cos() && gap > limits.min_gap)
+        .then_some((plane, m, sigma))
 }
 
 /// The moments of the points of `pixels`, summed in their order.
@@ -257,7 +346,15 @@ mod tests {
     use rangeimage::Camera;
 
     /// The limits of the default configuration.
-    const LIMITS: Limits = Limits { min_px: 40, max_px: 200, scales: 2.5, min_gap: 4.0, max_slant_deg: 80.0 };
+    const LIMITS: Limits = Limits {
+        min_px: 40,
+        max_px: 200,
+        scales: 2.5,
+        min_gap: 4.0,
+        max_slant_deg: 80.0,
+        grow_px: 0,
+        grow_margin: 0.25,
+    };
 
     /// The middle of [`recovered`]'s default image: columns 15–24 of 12 rows (120 px).
     const MIDDLE: (usize, std::ops::Range<usize>) = (12, 15..25);
@@ -397,5 +494,75 @@ mod tests {
         let (comp, n, _) = recovered((30, 17..23), slope, 2, LIMITS);
         assert_eq!(n, 1);
         assert!(middle_labels(&comp, 17..23).iter().all(|&l| l == 3));
+    }
+
+    /// A 40 × 12 grid image with ±0.2 of checkerboard noise: v = 98 left of column 15 (label 1), a face sloping by 2 per
+    /// pixel over columns 15–27 (v = 102 … 126) and v = 130 from column 28 on (label 2): steps of 4 on both sides of
+    /// the face. Columns 15–24 are unlabelled; 25–27, the rest of the face, are label 2's, as the fill leaves a
+    /// face's pixels within its limit of a neighbour's plane. The planes are those of the regions' pixels off the
+    /// face. Returns the labels of one row after [`recover`] with `limits`, and the faces made.
+    fn grown(limits: Limits) -> (Vec<u32>, usize) {
+        let (w, h) = (40usize, 12usize);
+        let depth = |x: usize| match x {
+            0..15 => 98.0,
+            15..28 => 100.0 + 2.0 * (x as f32 - 14.0),
+            _ => 130.0,
+        };
+        let range: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                depth(x) + if (x + y) % 2 == 0 { 0.2 } else { -0.2 }
+            })
+            .collect();
+        let camera = Camera::Grid;
+        let mut points = Vec::new();
+        let scene = Scene::new(&range, (w, h), &camera, &mut points);
+        let label = |x: usize| match x {
+            0..15 => 1,
+            15..25 => 0,
+            _ => 2,
+        };
+        let mut comp: Vec<u32> = (0..w * h).map(|i| label(i % w)).collect();
+        let mut moments = vec![Moments::default(); 2];
+        for i in 0..w * h {
+            let x = i % w;
+            if !(15..28).contains(&x) {
+                moments[label(x) as usize - 1].add(scene.point(x, i / w).unwrap());
+            }
+        }
+        let mut planes: Vec<Plane> = moments.iter().map(|m| fit_plane(m, &camera)).collect();
+        let (mut parent, mut guide) = (vec![0, 1, 2], vec![0, 0]);
+        let grow = (&mut parent, &mut moments, &mut planes, &mut guide);
+        let n = recover(&scene, &mut comp, grow, limits, &mut Buffers::default());
+        // Every row alike.
+        assert!(comp.chunks_exact(w).all(|row| row == &comp[..w]));
+        (comp[..w].to_vec(), n)
+    }
+
+    #[test]
+    fn a_face_takes_back_what_a_neighbour_held_of_it() {
+        let row = |face_to: usize| -> Vec<u32> {
+            (0..40)
+                .map(|x| {
+                    if x < 15 {
+                        1
+                    } else if x < face_to {
+                        3
+                    } else {
+                        2
+                    }
+                })
+                .collect()
+        };
+        // Without growth the face keeps its group, columns 15–24.
+        assert_eq!(grown(LIMITS), (row(25), 1));
+        // Growing, it takes columns 25–27 (its plane fits them; the neighbour's lies 4–8 off) and stops at the steps:
+        // columns 14 and 28 lie 0.9 off the face's plane, beyond 2.5 noise scales (0.25, the floor).
+        assert_eq!(grown(Limits { grow_px: 8, ..LIMITS }), (row(28), 1));
+        // Two rings take two columns.
+        assert_eq!(grown(Limits { grow_px: 2, ..LIMITS }), (row(27), 1));
+        // A pixel its own plane explains as well as the face's stays: with a margin of 40 noise scales (10 units) none
+        // moves.
+        assert_eq!(grown(Limits { grow_px: 8, grow_margin: 40.0, ..LIMITS }), (row(25), 1));
     }
 }

@@ -96,7 +96,10 @@ use rangeimage::{Camera, EdgeMap, Grid, LabelImage, RangeImage, Region};
 ///    four neighbours in it, three quarters lie within `small_face_scales` noise scales of its plane (the largest RMS
 ///    of the regions beside it, at least 0.25) with that plane's RMS within one, its points lie farther than
 ///    `small_face_min_gap` noise scales (RMS) from every neighbour's plane, and its plane is seen at most
-///    `small_face_max_slant_deg` from the line of sight: a face too small or too thin for a region to grow in.
+///    `small_face_max_slant_deg` from the line of sight: a face too small or too thin for a region to grow in. Each
+///    face then takes, out to `small_face_grow_px` rings from its group, the pixels of the regions beside it that its
+///    plane explains within `small_face_scales` noise scales and better than their own plane by
+///    `small_face_grow_margin` noise scales: what the fill gave its neighbours of it before it existed.
 ///
 /// `regions = None` makes `regions` mode behave as `components`.
 ///
@@ -281,6 +284,8 @@ pub fn segment_into(
             scales: params.small_face_scales,
             min_gap: params.small_face_min_gap,
             max_slant_deg: params.small_face_max_slant_deg,
+            grow_px: params.small_face_grow_px as usize,
+            grow_margin: params.small_face_grow_margin,
         };
         let grow = (&mut *parent, &mut pieces.moments, &mut pieces.planes, &mut pieces.guide);
         let n = faces::recover(&scene, &mut pieces.comp, grow, limits, fabufs);

@@ -140,6 +140,14 @@ pub struct Params {
     /// `small_face_min_px` > 0: largest angle between the face's normal and the line of sight (a plane seen more
     /// nearly edge-on is the ramp of mixed pixels at a jump; region growing's `max_slant_deg` by default).
     pub small_face_max_slant_deg: f64,
+    /// `small_face_min_px` > 0: a face then takes, ring by ring out to this many pixels from it, the pixels of the
+    /// regions beside it that its plane explains within `small_face_scales` noise scales and better than their own
+    /// region's plane by `small_face_grow_margin` noise scales: the part of the face that a neighbour's fill took, within
+    /// its fill limit, before the face existed (0 = off).
+    pub small_face_grow_px: u32,
+    /// `small_face_grow_px` > 0: how much nearer a pixel must lie to the face's plane than to its own region's, in noise
+    /// scales.
+    pub small_face_grow_margin: f64,
 }
 
 impl Default for Params {
@@ -175,6 +183,8 @@ impl Default for Params {
             small_face_scales: 2.5,
             small_face_min_gap: 4.0,
             small_face_max_slant_deg: 80.0,
+            small_face_grow_px: 8,
+            small_face_grow_margin: 0.25,
         }
     }
 }
@@ -220,6 +230,8 @@ impl Params {
         ParamError::at_least("segment.small_face_scales", self.small_face_scales, 0.0)?;
         ParamError::at_least("segment.small_face_min_gap", self.small_face_min_gap, 0.0)?;
         ParamError::in_range("segment.small_face_max_slant_deg", self.small_face_max_slant_deg, 0.0, 90.0)?;
+        ParamError::in_range("segment.small_face_grow_px", self.small_face_grow_px, 0, 64)?;
+        ParamError::at_least("segment.small_face_grow_margin", self.small_face_grow_margin, 0.0)?;
         Ok(())
     }
 }
