@@ -119,14 +119,8 @@ pub(crate) fn recover(
         while let Some(i) = stack.pop() {
             group.push(i);
             let i = i as usize;
-            let (x, y) = (i % w, i / w);
             let mut inside = 0;
-            for (ok, j) in [
-                (x > 0, i.wrapping_sub(1)),
-                (x + 1 < w, i + 1),
-                (y > 0, i.wrapping_sub(w)),
-                (y + 1 < h, i + w),
-            ] {
+            for (ok, j) in four_neighbours(i, (w, h)) {
                 if !ok {
                     continue;
                 }
@@ -211,14 +205,7 @@ fn grow(
         for _ in 0..limits.grow_px {
             next.clear();
             for &i in ring.iter() {
-                let i = i as usize;
-                let (x, y) = (i % w, i / w);
-                for (ok, j) in [
-                    (x > 0, i.wrapping_sub(1)),
-                    (x + 1 < w, i + 1),
-                    (y > 0, i.wrapping_sub(w)),
-                    (y + 1 < h, i + w),
-                ] {
+                for (ok, j) in four_neighbours(i as usize, (w, h)) {
                     let l = if ok { comp[j] } else { 0 };
                     // Unlabelled, or a face's (this one's included).
                     if l == 0 || l >= first_face {
@@ -329,6 +316,14 @@ fn face(
     );
     (seen_from >= limits.max_slant_deg.to_radians().cos() && gap > limits.min_gap)
         .then_some((plane, m, sigma))
+}
+
+/// The 4-neighbours of pixel `i` of a `w × h` frame, left, right, up, down: whether each lies in the frame, and its index
+/// (meaningless where it does not).
+#[inline]
+fn four_neighbours(i: usize, (w, h): (usize, usize)) -> [(bool, usize); 4] {
+    let (x, y) = (i % w, i / w);
+    [(x > 0, i.wrapping_sub(1)), (x + 1 < w, i + 1), (y > 0, i.wrapping_sub(w)), (y + 1 < h, i + w)]
 }
 
 /// The moments of the points of `pixels`, summed in their order.
