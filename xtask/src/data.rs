@@ -1,4 +1,5 @@
-//! Labelled data sets for `eval` and `tune`: the synthetic benchmark, real ABW folders, any `STEM.range` + `STEM.gt-seg` folder.
+//! Labelled data sets for `eval` and `tune`: the synthetic benchmark, its artefact families and rooms, real ABW folders,
+//! any folder of `STEM.range` (or `.png`, `.pgm`, `.tif`, `.tiff`, `.pcd`) with `STEM.gt-seg`.
 
 use anyhow::{Context, Result, bail};
 use rangeimage::{Camera, LabelImage};
@@ -22,6 +23,10 @@ pub struct DataSpec {
     /// With `dir: None`, an artefact family and its strength (`--data synthetic:FAMILY[@STRENGTH]`), generated
     /// into `target/synthetic/FAMILY-sSTRENGTH/` on every use.
     pub family: Option<(scenegen::Family, f64)>,
+    /// With `dir: None`, the rooms seen by a Kinect-like camera at this sensor strength (`--data
+    /// synthetic:rooms[@STRENGTH]`, [`scenegen::generate_room`]), generated into `target/synthetic/rooms-sSTRENGTH/` on
+    /// every use; a test set only.
+    pub rooms: Option<f64>,
     /// The camera of every image; `None`: by file name (ABW calibration 0 or 1, or [`rangeio::NYU_GREY`] for
     /// `nyu.K`).
     pub camera: Option<Camera>,
@@ -35,7 +40,7 @@ pub struct DataSpec {
 impl DataSpec {
     /// The synthetic ABW-like benchmark.
     pub fn synthetic() -> Self {
-        Self { dir: None, family: None, camera: None, inverted_depth: None, depth_scale: None }
+        Self { dir: None, family: None, rooms: None, camera: None, inverted_depth: None, depth_scale: None }
     }
 
     /// A folder of labelled images.
@@ -58,28 +63,36 @@ impl DataSpec {
             }
             None => (rest, 1.0),
         };
+        if name == "rooms" {
+            // 16-bit PNG in TUM's units: read in metres on the reader's default pinhole camera, the rooms' own.
+            return Ok(Self { rooms: Some(strength), ..Self::synthetic() });
+        }
         let family = scenegen::Family::from_name(name).with_context(|| {
             let names: Vec<&str> = scenegen::Family::ALL.iter().map(|f| f.name()).collect();
-            format!("--data {v}: unknown family `{name}` (families: {})", names.join(", "))
+            format!("--data {v}: unknown family `{name}` (families: {}, and rooms)", names.join(", "))
         })?;
         Ok(Self { family: Some((family, strength)), ..Self::synthetic() })
     }
 
     /// The folder this spec reads, generating the synthetic benchmark or the family set if needed.
     pub fn resolve_dir(&self, root: &Path) -> Result<PathBuf> {
-        match (&self.dir, self.family) {
-            (Some(d), _) => Ok(d.clone()),
-            (None, None) => crate::gen_data::ensure_synthetic_data(root),
-            (None, Some((family, strength))) => crate::gen_data::ensure_family_data(root, family, strength),
+        match (&self.dir, self.family, self.rooms) {
+            (Some(d), _, _) => Ok(d.clone()),
+            (None, _, Some(strength)) => crate::gen_data::ensure_rooms_data(root, strength),
+            (None, None, None) => crate::gen_data::ensure_synthetic_data(root),
+            (None, Some((family, strength)), None) => {
+                crate::gen_data::ensure_family_data(root, family, strength)
+            }
         }
     }
 
     /// The short name of a synthetic spec (`synthetic`, `synthetic:stripes@1`), `None` for a folder.
     pub fn synthetic_name(&self) -> Option<String> {
-        match (&self.dir, self.family) {
-            (Some(_), _) => None,
-            (None, None) => Some("synthetic".into()),
-            (None, Some((f, s))) => Some(format!("synthetic:{}@{s}", f.name())),
+        match (&self.dir, self.family, self.rooms) {
+            (Some(_), _, _) => None,
+            (None, _, Some(s)) => Some(format!("synthetic:rooms@{s}")),
+            (None, None, None) => Some("synthetic".into()),
+            (None, Some((f, s)), None) => Some(format!("synthetic:{}@{s}", f.name())),
         }
     }
 }
@@ -140,8 +153,8 @@ pub struct LabelledImage {
     pub gt_seg: PathBuf,
     /// Angles between adjacent GT regions, where the data set has them.
     pub gt_ang: Option<PathBuf>,
-    /// The camera to read it with.
-    pub camera: Camera,
+    /// The camera to read it with (`None`: the format's own, e.g. a 16-bit PNG's default pinhole camera in metres).
+    pub camera: Option<Camera>,
     /// `ReadOptions::inverted_depth` to read it with.
     pub inverted_depth: Option<f64>,
     /// Multiplies every depth value after reading ([`DataSpec::depth_scale`]).
@@ -166,7 +179,7 @@ impl LabelledImage {
         let frame = rangeio::read(
             &self.range,
             &rangeio::ReadOptions {
-                camera: Some(self.camera),
+                camera: self.camera,
                 inverted_depth: self.inverted_depth,
                 ..Default::default()
             },
@@ -213,6 +226,9 @@ pub struct DataSet {
 /// `eval`; where the split is absent (the real ABW test images stand in for training data) or the names are not
 /// ABW names, every `STEM.range` with a `STEM.gt-seg` beside it is read. Images without ABW names need `--camera`.
 pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
+    if spec.rooms.is_some() && role == Role::Tune {
+        bail!("--data synthetic:rooms is a test set only: nothing is tuned on it");
+    }
     let dir = spec.resolve_dir(root)?;
     let name = match &spec.dir {
         None => spec.synthetic_name().unwrap_or_default(),
@@ -241,7 +257,7 @@ pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
                     range: img.range.clone(),
                     gt_seg,
                     gt_ang: img.gt_ang.clone(),
-                    camera: spec.camera.unwrap_or(img.camera),
+                    camera: Some(spec.camera.unwrap_or(img.camera)),
                     inverted_depth: spec.inverted_depth,
                     depth_scale: spec.depth_scale,
                 });
@@ -254,12 +270,19 @@ pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
         }
     };
     if images.is_empty() {
-        bail!("{}: no labelled images (STEM.range with STEM.gt-seg)", dir.display());
+        bail!(
+            "{}: no labelled images (STEM.range, .png, .pgm, .tif, .tiff or .pcd with STEM.gt-seg)",
+            dir.display()
+        );
     }
     let camera = match (spec.camera, spec.inverted_depth) {
         (Some(c), None) => format!("{c:?}"),
         (Some(c), Some(o)) => format!("{c:?}, depth = {o} − stored value"),
-        (None, _) => "by file name (ABW calibration 0 or 1; nyu.K: nyu-grey)".to_string(),
+        (None, _) => {
+            "by file name (ABW calibration 0 or 1; nyu.K: nyu-grey; PNG, PGM, TIFF and PCD: the reader's, \
+                      a pinhole camera in metres)"
+                .to_string()
+        }
     };
     let camera = match spec.depth_scale {
         Some(m) => format!("{camera}; depth × {m}"),
@@ -273,24 +296,34 @@ fn is_nyu_grey_stem(stem: &str) -> bool {
     stem.strip_prefix("nyu.").is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
 }
 
-/// Every `STEM.range` in `dir` with a `STEM.gt-seg` beside it, sorted by stem (numbers in natural order).
+/// The extensions of range files a folder of labelled images may hold, in the order a stem's file is chosen by.
+const RANGE_EXTENSIONS: [&str; 6] = ["range", "png", "pgm", "tif", "tiff", "pcd"];
+
+/// Every range file in `dir` (`STEM.range`, else `STEM.png`, `.pgm`, `.tif`, `.tiff` or `.pcd`: the first of
+/// [`RANGE_EXTENSIONS`]) with a `STEM.gt-seg` beside it, sorted by stem (numbers in natural order).
 fn every_labelled(dir: &Path, spec: &DataSpec) -> Result<Vec<LabelledImage>> {
     let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
     let mut images = Vec::new();
     for entry in entries {
         let entry = entry.with_context(|| format!("{}: cannot list", dir.display()))?;
         let file_name = entry.file_name();
-        let Some(stem) = file_name.to_str().and_then(|n| n.strip_suffix(".range")) else { continue };
+        let Some((stem, ext)) = file_name.to_str().and_then(|n| n.rsplit_once('.')) else { continue };
+        let Some(rank) = RANGE_EXTENSIONS.iter().position(|&e| e == ext) else { continue };
         let gt_seg = dir.join(format!("{stem}.gt-seg"));
-        if !gt_seg.is_file() {
+        // A stem with files of several extensions is read from the first of them.
+        if !gt_seg.is_file()
+            || RANGE_EXTENSIONS[..rank].iter().any(|e| dir.join(format!("{stem}.{e}")).is_file())
+        {
             continue;
         }
         let (camera, inverted_depth) = match (spec.camera, rangeio::abw::camera_for_path(&entry.path())) {
-            (Some(c), _) => (c, spec.inverted_depth),
-            (None, Some(c)) => (c, None),
-            (None, None) if is_nyu_grey_stem(stem) => {
-                (rangeio::NYU_GREY.camera, Some(rangeio::NYU_GREY.inverted_depth))
+            (Some(c), _) => (Some(c), spec.inverted_depth),
+            (None, Some(c)) => (Some(c), None),
+            (None, None) if ext == "range" && is_nyu_grey_stem(stem) => {
+                (Some(rangeio::NYU_GREY.camera), Some(rangeio::NYU_GREY.inverted_depth))
             }
+            // Sensor formats carry their units, and the reader knows their usual camera.
+            (None, None) if ext != "range" => (None, None),
             (None, None) => {
                 bail!("{}: no camera for this file name: pass --camera after --data", entry.path().display())
             }
@@ -426,7 +459,7 @@ mod tests {
         let nyu = rangeio::NYU_GREY;
         assert_eq!(
             (set.images[0].camera, set.images[0].inverted_depth),
-            (nyu.camera, Some(nyu.inverted_depth))
+            (Some(nyu.camera), Some(nyu.inverted_depth))
         );
         assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 270.0);
         // An explicit camera wins, without the inversion.
@@ -435,5 +468,48 @@ mod tests {
         assert_eq!(set.images[0].load().unwrap().frame.range[(0, 0)], 100.0);
         assert!(!is_nyu_grey_stem("nyu.") && !is_nyu_grey_stem("nyu.1a") && is_nyu_grey_stem("nyu.1436"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn sensor_formats_are_labelled_images_read_with_their_own_camera() {
+        let dir = std::env::temp_dir().join(format!("xtask-data-png-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // 16-bit PNG in TUM's units (1/5000 m): 10000 = 2 m.
+        let depth = rangeimage::Grid::new(4, 3, 10000u16);
+        rangeio::png::write_gray16_png(&dir.join("frame.1.png"), &depth).unwrap();
+        rangeio::abw::write_labels(&dir.join("frame.1.gt-seg"), &LabelImage::new(4, 3, 10)).unwrap();
+        // A stem with a .range and a .png is read from the .range; a .png without ground truth is skipped.
+        rangeio::abw::write_range(&dir.join("frame.2.range"), &rangeimage::RangeImage::new(4, 3, 7.0))
+            .unwrap();
+        rangeio::png::write_gray16_png(&dir.join("frame.2.png"), &depth).unwrap();
+        rangeio::abw::write_labels(&dir.join("frame.2.gt-seg"), &LabelImage::new(4, 3, 10)).unwrap();
+        rangeio::png::write_gray16_png(&dir.join("unlabelled.png"), &depth).unwrap();
+        let spec = DataSpec { camera: None, ..DataSpec::folder(&dir) };
+        // frame.2.range has no camera by its name.
+        let err = discover(Path::new("."), &spec, Role::Eval).unwrap_err();
+        assert!(format!("{err:#}").contains("frame.2.range: no camera"), "{err:#}");
+        std::fs::remove_file(dir.join("frame.2.range")).unwrap();
+        let set = discover(Path::new("."), &spec, Role::Eval).unwrap();
+        let stems: Vec<&str> = set.images.iter().map(|i| i.stem.as_str()).collect();
+        assert_eq!(stems, ["frame.1", "frame.2"]);
+        assert_eq!(set.images[0].camera, None);
+        let loaded = set.images[0].load().unwrap();
+        assert!((loaded.frame.range[(0, 0)] - 2.0).abs() < 1e-6, "{}", loaded.frame.range[(0, 0)]);
+        assert_eq!(loaded.frame.camera, rangeio::default_pinhole(4, 3));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn rooms_are_a_test_set_read_in_metres() {
+        let spec = DataSpec::parse("synthetic:rooms@0.5").unwrap();
+        assert_eq!(spec.rooms, Some(0.5));
+        // No camera given: a 16-bit PNG of the rooms' size is read on the rooms' camera.
+        assert_eq!(spec.camera, None);
+        assert_eq!(rangeio::default_pinhole(640, 480), scenegen::RoomParams::default().camera());
+        assert_eq!(spec.synthetic_name().as_deref(), Some("synthetic:rooms@0.5"));
+        assert_eq!(DataSpec::parse("synthetic:rooms").unwrap().rooms, Some(1.0));
+        let err = discover(Path::new("."), &spec, Role::Tune).unwrap_err();
+        assert!(format!("{err:#}").contains("test set only"), "{err:#}");
+        assert!(DataSpec::parse("synthetic:roomz").is_err());
     }
 }

@@ -207,6 +207,47 @@ pub fn ensure_family_data(root: &Path, family: scenegen::Family, strength: f64) 
     Ok(dir)
 }
 
+/// The folder of a rooms set: `target/synthetic/rooms-sSTRENGTH`.
+pub fn rooms_dir(root: &Path, strength: f64) -> PathBuf {
+    root.join("target/synthetic").join(format!("rooms-s{strength}"))
+}
+
+/// Generates the rooms set at `strength` ([`scenegen::generate_room`]: `room.test.N.png`, depth in TUM's 16-bit units,
+/// and `room.test.N.gt-seg`, N < [`scenegen::ROOM_TEST_IMAGES`]) into [`rooms_dir`], every time, with a manifest, and
+/// returns the directory.
+pub fn ensure_rooms_data(root: &Path, strength: f64) -> Result<PathBuf> {
+    let dir = rooms_dir(root, strength);
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+    let names: Vec<String> = (0..scenegen::ROOM_TEST_IMAGES)
+        .into_par_iter()
+        .map(|index| {
+            let (params, seed) = scenegen::room_image(index, strength);
+            let stem = format!("room.test.{index}");
+            params.validate().map_err(|e| anyhow::anyhow!("{stem}: {e}"))?;
+            let scene = scenegen::generate_room(&params, seed);
+            rangeio::png::write_gray16_png(&dir.join(format!("{stem}.png")), &scene.depth)?;
+            let pairs = write_labels(&dir.join(format!("{stem}.gt-seg")), &scene.labels)?;
+            anyhow::ensure!(
+                pairs.iter().all(|&(old, new)| old == u32::from(new)),
+                "{stem}: ground-truth labels were renumbered by the 8-bit writer"
+            );
+            Ok(stem)
+        })
+        .collect::<Result<_>>()?;
+    let mut files: Vec<String> =
+        names.iter().flat_map(|stem| [format!("{stem}.gt-seg"), format!("{stem}.png")]).collect();
+    files.sort();
+    let mut hashes = Vec::with_capacity(files.len());
+    for name in files {
+        let path = dir.join(&name);
+        let bytes = std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+        hashes.push((name, sha256_hex(&bytes)));
+    }
+    rangeio::write_atomic(&dir.join(MANIFEST), manifest_text(&hashes).as_bytes())?;
+    Ok(dir)
+}
+
 /// Makes sure `root/data/synthetic-abw` holds the benchmark exactly as the committed manifest
 /// says, generating it if files are missing or differ; returns the directory.
 ///

@@ -9,6 +9,8 @@
 //! Gaussian depth noise, mixed pixels at jump edges and dropout blobs; and quantises to 8 bits.
 //! Optional artefact families ([`Family`]: scanner stripes, quantisation staircases, Kinect-like
 //! depth-dependent noise and holes) model other sensors; the benchmark uses none of them.
+//! [`generate_room`] renders another kind of scene: rooms seen by a Kinect-like depth camera, in metres on a pinhole
+//! camera (the `rooms` module).
 //!
 //! Ground truth follows the ABW rules: one label per connected visible piece of a plane,
 //! numbered from 10 in raster order of first appearance; 0 on no-data pixels and pieces under
@@ -23,8 +25,10 @@ mod family;
 mod layout;
 mod math;
 mod render;
+mod rooms;
 
 pub use family::{FAMILY_TEST_IMAGES, FAMILY_TRAIN_IMAGES, Family, Kinect, Staircase, Stripes, family_image};
+pub use rooms::{ROOM_METRES_PER_UNIT, ROOM_TEST_IMAGES, RoomParams, RoomScene, generate_room, room_image};
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;

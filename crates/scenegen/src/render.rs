@@ -45,7 +45,7 @@ struct Solid {
 }
 
 /// Entry and exit parameters of the line `o + t·r` through a convex solid, with the entry plane.
-fn slab(planes: &[(V3, f64, u32)], o: V3, r: V3) -> Option<(f64, f64, u32)> {
+pub(crate) fn slab(planes: &[(V3, f64, u32)], o: V3, r: V3) -> Option<(f64, f64, u32)> {
     let (mut t0, mut t1, mut face) = (f64::NEG_INFINITY, f64::INFINITY, NO_FACE);
     for &(n, e, f) in planes {
         let den = dot(n, r);
@@ -487,7 +487,7 @@ fn shadowed(p: V3, f: u32, own: u32, faces: &[(V3, f64)], solids: &[Solid], proj
 }
 
 /// Group index of every face: faces on the same plane (within rounding) share a group.
-fn plane_groups(faces: &[(V3, f64)]) -> Vec<u32> {
+pub(crate) fn plane_groups(faces: &[(V3, f64)]) -> Vec<u32> {
     let mut group = vec![u32::MAX; faces.len()];
     for i in 0..faces.len() {
         if group[i] != u32::MAX {
@@ -507,7 +507,7 @@ fn plane_groups(faces: &[(V3, f64)]) -> Vec<u32> {
 /// 4-connected components of equal keys (`u32::MAX` = none); components of at least `min_px`
 /// pixels get labels from 10 in raster order of first appearance (at most 246, the largest kept).
 /// Returns the labels and the key of each label (index `label − 10`).
-fn label_components(key: &Grid<u32>, min_px: u32) -> (LabelImage, Vec<u32>) {
+pub(crate) fn label_components(key: &Grid<u32>, min_px: u32) -> (LabelImage, Vec<u32>) {
     let (w, h) = key.dimensions();
     let mut comp = Grid::new(w, h, u32::MAX);
     let mut comps: Vec<(u32, usize)> = Vec::new(); // (key, size)
