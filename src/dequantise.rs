@@ -23,6 +23,11 @@
 //! [`crate::units`] already makes to take the rounding as the image's noise floor. Noise at least as large as
 //! the rounding dithers the risers into noise, which the stages handle as noise; the real ABW images and the NYU
 //! frames have it (docs/method.md §2.6).
+//!
+//! A pinhole frame that is no staircase of its depth may be one of its inverse depth: a structured-light or stereo
+//! camera's disparity in uniform steps (a Kinect's 1/8 px), turned into depth and rounded to the frame's units. Its
+//! inverse depth is then rounded to its steps, dequantised and turned back into depth (`disparity_step`,
+//! `disparity_staircase`; a plane's inverse depth is affine in the pixel coordinates, so its terraces are straight).
 
 use rangeimage::{Camera, RangeImage};
 
@@ -42,16 +47,29 @@ pub struct Scratch {
     same: Vec<u8>,
     /// The memory of the last dequantised image, given back by [`Scratch::recycle`].
     values: Vec<f32>,
+    /// A disparity staircase's inverse depth in steps ([`disparity_step`]), and the risers it sampled.
+    inverse: Vec<f32>,
+    risers: Vec<f64>,
 }
 
 impl Scratch {
     /// Reserves room for frames of `px` pixels (untouched memory: later frames of that size allocate nothing,
     /// whether or not they are staircases).
     pub fn reserve(&mut self, px: usize) {
-        for v in [&mut self.down, &mut self.up, &mut self.ramp, &mut self.ramp_width, &mut self.values] {
+        for v in [
+            &mut self.down,
+            &mut self.up,
+            &mut self.ramp,
+            &mut self.ramp_width,
+            &mut self.values,
+            &mut self.inverse,
+        ] {
             v.clear();
             v.reserve(px);
         }
+        // Two neighbour pairs per pixel of every SAMPLE_STRIDE-th row (at most one value per pixel).
+        self.risers.clear();
+        self.risers.reserve(px);
         self.same.clear();
         self.same.reserve(px);
     }
@@ -133,8 +151,148 @@ pub fn for_config(
     let stairs = staircase(range, noise, screen);
     match stairs.step {
         Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), sigma: None },
-        None => Prepared { dequantised: None, sigma: stairs.sigma },
+        None => match camera {
+            Camera::Pinhole { .. } => match disparity_staircase(range, noise, scratch) {
+                Some(prepared) => prepared,
+                None => Prepared { dequantised: None, sigma: stairs.sigma },
+            },
+            _ => Prepared { dequantised: None, sigma: stairs.sigma },
+        },
     }
+}
+
+/// A depth difference between neighbours beyond this share of the nearer depth is a jump, not a riser of
+/// [`disparity_step`]'s staircase (a Kinect's riser is 0.3 % of the depth at 1 m, 1.3 % at 4 m).
+const DISPARITY_JUMP: f64 = 0.05;
+/// Fewest risers [`disparity_step`] reads a step from.
+const DISPARITY_MIN_RISERS: usize = 1000;
+/// Least share of equal neighbours (terraces) of a disparity staircase, as [`planefit::noise`]'s nearly uniform
+/// steps ask.
+const DISPARITY_MIN_TERRACES: f64 = 0.25;
+/// Least share of the risers within 0.2 steps of a whole number of steps (noisy depth has about 40 %).
+const DISPARITY_MIN_WHOLE: f64 = 0.9;
+/// The largest σ, in steps, of the inverse depth of a disparity staircase that is dequantised: `√(2 / 12)`, noise
+/// below the rounding error `1 / √12` with the rounding error added. Its terraces are narrow (a floor's are 2–10 px
+/// wide), so most 5 × 5 windows straddle a riser and σ reads the whole rounding error even without noise, where a
+/// staircase of wide terraces ([`staircase`]) reads next to none of it.
+const DISPARITY_MAX_SIGMA: f64 = 0.408_248_290_463_863;
+
+/// The step of the inverse depth of a pinhole frame whose depth was computed from a disparity quantised in uniform
+/// steps and then rounded to the frame's units (a Kinect v1 or another structured-light camera, OpenNI's millimetres,
+/// TUM's fifths of a millimetre): the depth steps grow with the square of depth, so no uniform step of the depth
+/// shows, but the inverse depth steps evenly. `None` unless, on every [`SAMPLE_STRIDE`]-th row, at least
+/// [`DISPARITY_MIN_TERRACES`] of the neighbour pairs are equal, and of the others (jumps of more than
+/// [`DISPARITY_JUMP`] left out, at least [`DISPARITY_MIN_RISERS`] of them), [`DISPARITY_MIN_WHOLE`] differ in inverse
+/// depth by a whole number of steps, within 0.2 steps: the step is the median of the smallest risers (those within
+/// half to one and a half times the lower quartile). `risers` is working memory.
+fn disparity_step(range: &RangeImage, risers: &mut Vec<f64>) -> Option<f64> {
+    let (w, h) = (range.width() as usize, range.height() as usize);
+    let v = range.as_slice();
+    risers.clear();
+    let (mut pairs, mut equal) = (0usize, 0usize);
+    for y in (0..h).step_by(SAMPLE_STRIDE) {
+        for x in 0..w {
+            let a = v[y * w + x];
+            if !(a.is_finite() && a > 0.0) {
+                continue;
+            }
+            for j in [(x + 1 < w).then(|| y * w + x + 1), (y + 1 < h).then(|| (y + 1) * w + x)]
+                .into_iter()
+                .flatten()
+            {
+                let b = v[j];
+                if !(b.is_finite() && b > 0.0) {
+                    continue;
+                }
+                pairs += 1;
+                if a == b {
+                    equal += 1;
+                    continue;
+                }
+                let (a, b) = (f64::from(a), f64::from(b));
+                if (a - b).abs() <= DISPARITY_JUMP * a.min(b) {
+                    risers.push((1.0 / a - 1.0 / b).abs());
+                }
+            }
+        }
+    }
+    if risers.len() < DISPARITY_MIN_RISERS || (equal as f64) < DISPARITY_MIN_TERRACES * pairs as f64 {
+        return None;
+    }
+    risers.sort_unstable_by(f64::total_cmp);
+    let quartile = risers[risers.len() / 4];
+    let (lo, hi) =
+        (risers.partition_point(|&d| d < 0.5 * quartile), risers.partition_point(|&d| d < 1.5 * quartile));
+    let q = risers[(lo + hi) / 2];
+    if !(q > 0.0 && q.is_finite()) {
+        return None;
+    }
+    let whole = risers
+        .iter()
+        .filter(|&&d| {
+            let m = d / q;
+            m.round() >= 1.0 && (m - m.round()).abs() < 0.2
+        })
+        .count();
+    (whole as f64 >= DISPARITY_MIN_WHOLE * risers.len() as f64).then_some(q)
+}
+
+/// A pinhole frame whose inverse depth is a staircase ([`disparity_step`]) and whose σ, read on the inverse depth in
+/// steps, is under [`DISPARITY_MAX_SIGMA`]: the inverse depth is rounded to its steps, dequantised
+/// ([`dequantise`], step 1) and turned back into depth. The step reported, and the noise floor it sets, is the depth
+/// step at the frame's median sampled depth. `None` for any other frame.
+fn disparity_staircase(range: &RangeImage, noise: &mut Vec<f64>, scratch: &mut Scratch) -> Option<Prepared> {
+    let q = disparity_step(range, &mut scratch.risers)?;
+    let mut inverse = std::mem::take(&mut scratch.inverse);
+    inverse.clear();
+    inverse.extend(
+        range
+            .as_slice()
+            .iter()
+            .map(|&r| if r.is_finite() && r > 0.0 { (1.0 / f64::from(r) / q) as f32 } else { f32::NAN }),
+    );
+    let steps = RangeImage::from_vec(range.width(), range.height(), inverse).expect("one value per pixel");
+    let sigma = planefit::noise::sigma_sampled_with(&steps, SAMPLE_STRIDE, noise);
+    let mut inverse = steps.into_vec();
+    // NaN (too few windows) is no staircase.
+    if sigma.is_nan() || sigma >= DISPARITY_MAX_SIGMA {
+        scratch.inverse = inverse;
+        return None;
+    }
+    inverse.iter_mut().for_each(|u| *u = u.round());
+    let steps = RangeImage::from_vec(range.width(), range.height(), inverse).expect("one value per pixel");
+    let mut depth = dequantise(&steps, 1.0, scratch);
+    scratch.inverse = steps.into_vec();
+    depth.as_mut_slice().iter_mut().for_each(|u| {
+        *u = if u.is_finite() && *u > 0.0 { (1.0 / (f64::from(*u) * q)) as f32 } else { f32::NAN }
+    });
+    // The depth step at the median depth of the risers' rows: q · z².
+    let z = median_depth(range, &mut scratch.risers)?;
+    let step = q * z * z;
+    tracing::debug!(q, step, sigma, "disparity staircase: dequantised");
+    Some(Prepared { dequantised: Some((step, depth)), sigma: None })
+}
+
+/// The median of the valid depths of every [`SAMPLE_STRIDE`]-th pixel of every [`SAMPLE_STRIDE`]-th row; `z` is
+/// working memory.
+fn median_depth(range: &RangeImage, z: &mut Vec<f64>) -> Option<f64> {
+    let w = range.width() as usize;
+    z.clear();
+    z.extend(
+        range
+            .as_slice()
+            .chunks_exact(w.max(1))
+            .step_by(SAMPLE_STRIDE)
+            .flat_map(|row| row.iter().step_by(SAMPLE_STRIDE).copied())
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .map(f64::from),
+    );
+    if z.is_empty() {
+        return None;
+    }
+    let k = z.len() / 2;
+    let (_, m, _) = z.select_nth_unstable_by(k, f64::total_cmp);
+    Some(*m)
 }
 
 /// What [`for_config`] prepared an image as.
@@ -176,7 +334,7 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     assert!(q > 0.0 && q.is_finite(), "the step must be positive, got {q}");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let v = range.as_slice();
-    let Scratch { down, up, ramp, ramp_width, same, values } = scratch;
+    let Scratch { down, up, ramp, ramp_width, same, values, .. } = scratch;
     terrace_neighbours(v, (w, h), q, same);
     // Distances to the risers down and up within each terrace.
     // Seeds: the pixels beside a riser down, and beside a riser up.
@@ -439,6 +597,72 @@ mod tests {
             let v = z(f64::from(x), f64::from(y)) + noise * pattern(x, y);
             ((v / q).round() * q) as f32
         })
+    }
+
+    /// A floor seen by a Kinect-like camera (f = 150 px, 1.2 m below it, pitched down 20°), its disparity rounded to
+    /// 1/8 px of f · b = 150 px × 75 mm, plus `noise` (m, at 1 m, growing with z²) times the pattern before the
+    /// rounding, its depth then stored in `unit` metres; no data beyond 4 m.
+    fn kinect_floor(noise: f64, unit: f64, disparity_steps: bool) -> RangeImage {
+        let (f, fb) = (150.0, 150.0 * 0.075);
+        let (s, c) = (20f64.to_radians().sin(), 20f64.to_radians().cos());
+        Grid::from_fn(160, 120, |x, y| {
+            // The ray's height drop per metre of depth; the floor lies 1.2 m below the camera.
+            let down = (f64::from(y) - 59.5) / f * c + s;
+            if down <= 0.0 {
+                return f32::NAN;
+            }
+            let z = 1.2 / down;
+            if z > 4.0 {
+                return f32::NAN;
+            }
+            let z = z + noise * z * z * pattern(x, y);
+            let z = if disparity_steps { fb / ((fb / z * 8.0).round() / 8.0) } else { z };
+            ((z / unit).round() * unit) as f32
+        })
+    }
+
+    #[test]
+    fn a_disparity_staircase_is_found_and_dequantised_in_inverse_depth() {
+        let exact = kinect_floor(0.0, 1e-9, false);
+        // TUM's 0.2 mm units: the step of the inverse depth is 1 / (8 f b).
+        let img = kinect_floor(0.0, 0.0002, true);
+        let q = disparity_step(&img, &mut Vec::new()).expect("a disparity staircase");
+        let expected = 1.0 / (8.0 * 150.0 * 0.075);
+        assert!((q / expected - 1.0).abs() < 0.02, "step {q}, expected {expected}");
+        let mut scratch = Scratch::default();
+        let prepared = disparity_staircase(&img, &mut Vec::new(), &mut scratch).expect("dequantised");
+        let (step, out) = prepared.dequantised.expect("dequantised");
+        assert!(step > 0.0 && step.is_finite());
+        // Much nearer the floor than the stored terraces, and within half a step of them, in inverse depth (where the
+        // steps are even).
+        let (mut se_in, mut se_out, mut n) = (0.0, 0.0, 0);
+        for (x, y, &t) in exact.enumerate() {
+            if !t.is_finite() {
+                assert!(!out[(x, y)].is_finite());
+                continue;
+            }
+            let (t, s, o) = (f64::from(t), f64::from(img[(x, y)]), f64::from(out[(x, y)]));
+            assert!((1.0 / o - 1.0 / s).abs() <= 0.5 * q * 1.05 + 1e-9, "({x}, {y}): {o} against {s}");
+            se_in += (1.0 / s - 1.0 / t).powi(2);
+            se_out += (1.0 / o - 1.0 / t).powi(2);
+            n += 1;
+        }
+        let (rms_in, rms_out) = ((se_in / f64::from(n)).sqrt() / q, (se_out / f64::from(n)).sqrt() / q);
+        assert!(rms_in > 0.25, "the staircase's own error, {rms_in} steps");
+        // Terraces 2 rows wide here: the ramps between risers are as fine as pixels allow (0.14 steps).
+        assert!(rms_out < 0.2, "dequantised: {rms_out} steps from the floor (stored: {rms_in})");
+    }
+
+    #[test]
+    fn depth_without_disparity_steps_is_no_disparity_staircase() {
+        // Continuous depth with noise, depth in uniform steps (8-bit renderings such as the NYU frames), and a
+        // disparity staircase whose noise dithers its risers: none is dequantised.
+        let noisy = kinect_floor(0.004, 1e-6, false);
+        assert_eq!(disparity_step(&noisy, &mut Vec::new()), None);
+        let uniform = kinect_floor(0.0, 0.01, false);
+        assert_eq!(disparity_step(&uniform, &mut Vec::new()), None);
+        let dithered = kinect_floor(0.02, 0.0002, true);
+        assert!(disparity_staircase(&dithered, &mut Vec::new(), &mut Scratch::default()).is_none());
     }
 
     fn dequantised(img: &RangeImage, q: f64) -> RangeImage {

@@ -220,6 +220,23 @@ fn info_says_which_depth_is_a_staircase() {
 }
 
 #[test]
+fn info_says_which_frame_is_a_staircase_of_its_inverse_depth() {
+    // A room seen by a Kinect-like camera, its disparity hardly dithered (S = 0.5), and the same room exact.
+    let dir = tempfile::tempdir().unwrap();
+    let (stairs, exact) = (dir.path().join("stairs.png"), dir.path().join("exact.png"));
+    for (path, strength) in [(&stairs, 0.5), (&exact, 0.0)] {
+        let (params, seed) = scenegen::room_image(3, strength);
+        rangeio::png::write_gray16_png(path, &scenegen::generate_room(&params, seed).depth).unwrap();
+    }
+    let o = rangeseg(&["info".as_ref(), exact.as_os_str(), stairs.as_os_str()]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    let (a, b) = out.split_at(out.find("stairs.png").expect("both files described"));
+    assert!(!a.contains("staircase"), "{out}");
+    assert!(b.contains("a staircase of its inverse depth") && b.contains("dequantised"), "{out}");
+}
+
+#[test]
 fn regions_and_edges_write_what_segment_grows_and_detects() {
     // Two frames `segment` prepares before its stages run: a staircase, which it dequantises, and a Kinect-like
     // frame with `configs/fast.toml`, which it decimates. `regions` and `edges` must prepare them alike.

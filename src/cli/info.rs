@@ -98,8 +98,23 @@ fn describe(path: &std::path::Path, f: &Frame) -> String {
         let step = est.step.map_or_else(|| "continuous".to_string(), |q| format!("step {q:.4}"));
         // What `segment` does with it (with `pipeline.dequantise` on, as by default).
         let stairs = rangeseg::dequantise::staircase(&f.range, &mut Vec::new(), false).step.is_some();
+        // A pinhole frame that is no staircase of its depth may be one of its inverse depth (a disparity's steps).
+        let disparity = !stairs
+            && matches!(f.camera, Camera::Pinhole { .. })
+            && rangeseg::dequantise::for_config(
+                &f.range,
+                &f.camera,
+                &rangeseg::Config::default(),
+                &mut Vec::new(),
+                &mut rangeseg::dequantise::Scratch::default(),
+            )
+            .dequantised
+            .is_some();
         let stairs = if stairs {
             "; a staircase (noise below the step's rounding): dequantised by segment"
+        } else if disparity {
+            "; a staircase of its inverse depth (a disparity in uniform steps, noise below their rounding): \
+             dequantised by segment"
         } else {
             ""
         };
