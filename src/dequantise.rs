@@ -259,6 +259,11 @@ fn disparity_staircase(range: &RangeImage, noise: &mut Vec<f64>, scratch: &mut S
         scratch.inverse = inverse;
         return None;
     }
+    // The depth step at the median depth of the sampled pixels: q · z².
+    let Some(z) = median_depth(range, &mut scratch.risers) else {
+        scratch.inverse = inverse;
+        return None;
+    };
     inverse.iter_mut().for_each(|u| *u = u.round());
     let steps = RangeImage::from_vec(range.width(), range.height(), inverse).expect("one value per pixel");
     let mut depth = dequantise(&steps, 1.0, scratch);
@@ -266,8 +271,6 @@ fn disparity_staircase(range: &RangeImage, noise: &mut Vec<f64>, scratch: &mut S
     depth.as_mut_slice().iter_mut().for_each(|u| {
         *u = if u.is_finite() && *u > 0.0 { (1.0 / (f64::from(*u) * q)) as f32 } else { f32::NAN }
     });
-    // The depth step at the median depth of the risers' rows: q · z².
-    let z = median_depth(range, &mut scratch.risers)?;
     let step = q * z * z;
     tracing::debug!(q, step, sigma, "disparity staircase: dequantised");
     Some(Prepared { dequantised: Some((step, depth)), sigma: None })
