@@ -28,7 +28,7 @@ pub struct DataSpec {
     /// every use; a test set only.
     pub rooms: Option<f64>,
     /// The camera of every image; `None`: by file name (ABW calibration 0 or 1, or [`rangeio::NYU_GREY`] for
-    /// `nyu.K`).
+    /// `nyu.K`), and the reader's own for the sensor formats (PNG, PGM, TIFF, PCD).
     pub camera: Option<Camera>,
     /// `ReadOptions::inverted_depth` of every image (set with the camera by `--camera nyu-grey`).
     pub inverted_depth: Option<f64>,
@@ -224,7 +224,9 @@ pub struct DataSet {
 ///
 /// A folder with ABW names (`abw.train.N`, `abw.test.N`) gives its training split to `tune` and its test split to
 /// `eval`; where the split is absent (the real ABW test images stand in for training data) or the names are not
-/// ABW names, every `STEM.range` with a `STEM.gt-seg` beside it is read. Images without ABW names need `--camera`.
+/// ABW names, every range file with a `STEM.gt-seg` beside it is read (`.range`, `.png`, `.pgm`, `.tif`, `.tiff`,
+/// `.pcd`). `.range` images without ABW (or `nyu.K`) names need `--camera`; the sensor formats are read with the
+/// reader's own camera and units.
 pub fn discover(root: &Path, spec: &DataSpec, role: Role) -> Result<DataSet> {
     if spec.rooms.is_some() && role == Role::Tune {
         bail!("--data synthetic:rooms is a test set only: nothing is tuned on it");
