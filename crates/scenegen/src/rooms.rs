@@ -9,11 +9,10 @@
 //! seen beyond 80° from its normal (certain at 88°); no data beyond 8 m. Khoshelham and Elberink (2012) measured a
 //! random error of 1.4 mm · (z / 1 m)² for single Kinect measurements, but a real frame's noise is correlated over
 //! neighbouring pixels, which a local plane fit partly absorbs: at S = 1 the residual RMS of 5 × 5 plane fits matches
-//! the Kinect frames of `data/real` (TUM and OpenNI: 2.2, 3.2, 5.1, 6.6 and 9.0 mm at 1–1.5, 1.5–2, 2–2.5, 2.5–3 and
-//! 3–4 m; the rooms 2.1, 3.7, 5.7, 8.5 and 13.2 mm, the disparity steps weighing more far away). Depth is stored as
-//! TUM stores it:
-//! 16-bit samples of 0.2 mm (1/5000 m), 0 = no data, so `rangeio` reads a frame in metres with its default camera
-//! (f = 525 px, principal point at the image centre).
+//! the Kinect frames of `data/real` (TUM: 2.2, 3.2, 5.1, 6.6 and 9.0 mm at 1–1.5, 1.5–2, 2–2.5, 2.5–3 and 3–4 m;
+//! OpenNI, to 2 m: 1.6 and 2.7 mm; the rooms 2.1, 3.7, 5.7, 8.5 and 13.2 mm, the disparity steps weighing more far
+//! away). Depth is stored as TUM stores it: 16-bit samples of 0.2 mm (1/5000 m), 0 = no data, so `rangeio` reads a
+//! frame in metres with its default camera (f = 525 px, principal point at the image centre).
 //!
 //! Ground truth follows [`crate`]'s ABW rules: one label per connected visible piece of a plane (from 10, in raster
 //! order of first appearance), 0 on no data and on pieces under `min_region_px`.
