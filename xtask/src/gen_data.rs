@@ -93,12 +93,18 @@ fn generate_set(kind: SetKind) -> Result<Vec<(ImageId, Scene)>> {
 
 fn write_scene(dir: &Path, stem: &str, scene: &Scene) -> Result<()> {
     write_range(&dir.join(format!("{stem}.range")), &raw_to_range(&scene.range))?;
-    let pairs = write_labels(&dir.join(format!("{stem}.gt-seg")), &scene.labels)?;
-    let identity = pairs.iter().all(|&(old, new)| old == u32::from(new));
-    anyhow::ensure!(identity, "{stem}: ground-truth labels were renumbered by the 8-bit writer");
+    write_gt_seg(dir, stem, &scene.labels)?;
     let angles: Vec<AdjacentAngle> =
         scene.angles.iter().map(|&(a, b, angle_deg)| AdjacentAngle { a, b, angle_deg }).collect();
     write_angles(&dir.join(format!("{stem}.gt-ang")), &angles)?;
+    Ok(())
+}
+
+/// Writes `dir/STEM.gt-seg`; an error if the 8-bit writer had to renumber the labels (they must stay as generated).
+fn write_gt_seg(dir: &Path, stem: &str, labels: &rangeimage::LabelImage) -> Result<()> {
+    let pairs = write_labels(&dir.join(format!("{stem}.gt-seg")), labels)?;
+    let identity = pairs.iter().all(|&(old, new)| old == u32::from(new));
+    anyhow::ensure!(identity, "{stem}: ground-truth labels were renumbered by the 8-bit writer");
     Ok(())
 }
 
@@ -132,7 +138,12 @@ fn hash_files(dir: &Path) -> Hashes {
 
 /// `(name, sha256)` of every file of a set in `dir`; a missing file has the hash `"missing"`.
 fn hash_set_files(dir: &Path, kind: SetKind) -> Hashes {
-    set_file_names(kind)
+    hash_named(dir, set_file_names(kind))
+}
+
+/// `(name, sha256)` of the files `names` (in that order) in `dir`; a missing file has the hash `"missing"`.
+fn hash_named(dir: &Path, names: Vec<String>) -> Hashes {
+    names
         .into_par_iter()
         .map(|name| {
             let hash =
@@ -227,22 +238,16 @@ pub fn ensure_rooms_data(root: &Path, strength: f64) -> Result<PathBuf> {
             params.validate().map_err(|e| anyhow::anyhow!("{stem}: {e}"))?;
             let scene = scenegen::generate_room(&params, seed);
             rangeio::png::write_gray16_png(&dir.join(format!("{stem}.png")), &scene.depth)?;
-            let pairs = write_labels(&dir.join(format!("{stem}.gt-seg")), &scene.labels)?;
-            anyhow::ensure!(
-                pairs.iter().all(|&(old, new)| old == u32::from(new)),
-                "{stem}: ground-truth labels were renumbered by the 8-bit writer"
-            );
+            write_gt_seg(&dir, &stem, &scene.labels)?;
             Ok(stem)
         })
         .collect::<Result<_>>()?;
     let mut files: Vec<String> =
         names.iter().flat_map(|stem| [format!("{stem}.gt-seg"), format!("{stem}.png")]).collect();
     files.sort();
-    let mut hashes = Vec::with_capacity(files.len());
-    for name in files {
-        let path = dir.join(&name);
-        let bytes = std::fs::read(&path).with_context(|| format!("{}: cannot read", path.display()))?;
-        hashes.push((name, sha256_hex(&bytes)));
+    let hashes = hash_named(&dir, files);
+    if let Some((name, _)) = hashes.iter().find(|(_, h)| h == "missing") {
+        bail!("{}: cannot read the file just written", dir.join(name).display());
     }
     rangeio::write_atomic(&dir.join(MANIFEST), manifest_text(&hashes).as_bytes())?;
     Ok(dir)

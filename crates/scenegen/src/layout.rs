@@ -101,7 +101,8 @@ fn frustum(ax: f64, ay: f64, s: f64, shift: [f64; 2], h: f64) -> Piece {
     Piece { verts, faces }
 }
 
-fn uniform(rng: &mut Xoshiro256PlusPlus, lo: f64, hi: f64) -> f64 {
+/// A uniform draw in `[lo, hi)`.
+pub(crate) fn uniform(rng: &mut Xoshiro256PlusPlus, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * rng.random::<f64>()
 }
 

@@ -20,6 +20,7 @@
 //! Everything is computed with IEEE `+ − × ÷ √` and [`crate::math::sin_cos`] on one thread from one
 //! `Xoshiro256PlusPlus` stream per scene and one per sensor effect, so a seed gives bit-identical frames everywhere.
 
+use crate::layout::uniform;
 use crate::math::{V3, cross, dot, norm, scale, sin_cos};
 use crate::render::{gauss, label_components, plane_groups, slab};
 use rand::rngs::Xoshiro256PlusPlus;
@@ -134,11 +135,6 @@ struct BoxSpec {
     half: (f64, f64, f64),
     yaw: f64,
     base: f64,
-}
-
-/// A uniform draw in `[lo, hi)`.
-fn uniform(rng: &mut Xoshiro256PlusPlus, lo: f64, hi: f64) -> f64 {
-    lo + (hi - lo) * rng.random::<f64>()
 }
 
 impl Room {
