@@ -151,13 +151,10 @@ pub fn for_config(
     let stairs = staircase(range, noise, screen);
     match stairs.step {
         Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), sigma: None },
-        None => match camera {
-            Camera::Pinhole { .. } => match disparity_staircase(range, noise, scratch) {
-                Some(prepared) => prepared,
-                None => Prepared { dequantised: None, sigma: stairs.sigma },
-            },
-            _ => Prepared { dequantised: None, sigma: stairs.sigma },
-        },
+        // A pinhole frame may be a staircase of its inverse depth instead.
+        None if matches!(camera, Camera::Pinhole { .. }) => disparity_staircase(range, noise, scratch)
+            .unwrap_or(Prepared { dequantised: None, sigma: stairs.sigma }),
+        None => Prepared { dequantised: None, sigma: stairs.sigma },
     }
 }
 
