@@ -45,6 +45,8 @@ pub struct Scratch {
     ramp_width: Vec<f32>,
     /// Per pixel: which of its 8 neighbours lie in its terrace ([`terrace_neighbours`]).
     same: Vec<u8>,
+    /// The pixels of terraces with one riser, as [`dequantise`] ramps them from it.
+    members: Vec<u32>,
     /// The memory of the last dequantised image, given back by [`Scratch::recycle`].
     values: Vec<f32>,
     /// A disparity staircase's inverse depth in steps ([`disparity_step`]), and the risers it sampled.
@@ -72,6 +74,8 @@ impl Scratch {
         self.risers.reserve(px);
         self.same.clear();
         self.same.reserve(px);
+        self.members.clear();
+        self.members.reserve(px);
     }
 
     /// Takes back the memory of an image [`dequantise`] returned.
@@ -216,11 +220,12 @@ fn disparity_step(range: &RangeImage, risers: &mut Vec<f64>) -> Option<f64> {
     if risers.len() < DISPARITY_MIN_RISERS || (equal as f64) < DISPARITY_MIN_TERRACES * pairs as f64 {
         return None;
     }
-    risers.sort_unstable_by(f64::total_cmp);
-    let quartile = risers[risers.len() / 4];
-    let (lo, hi) =
-        (risers.partition_point(|&d| d < 0.5 * quartile), risers.partition_point(|&d| d < 1.5 * quartile));
-    let q = risers[(lo + hi) / 2];
+    // Ranks in the risers' order, by selection rather than sorting (the risers are positive and finite).
+    let n = risers.len();
+    let quartile = *risers.select_nth_unstable_by(n / 4, f64::total_cmp).1;
+    let below = |share: f64| risers.iter().filter(|&&d| d < share * quartile).count();
+    let (lo, hi) = (below(0.5), below(1.5));
+    let q = *risers.select_nth_unstable_by((lo + hi) / 2, f64::total_cmp).1;
     if !(q > 0.0 && q.is_finite()) {
         return None;
     }
@@ -334,27 +339,11 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     assert!(q > 0.0 && q.is_finite(), "the step must be positive, got {q}");
     let (w, h) = (range.width() as usize, range.height() as usize);
     let v = range.as_slice();
-    let Scratch { down, up, ramp, ramp_width, same, values, .. } = scratch;
+    let Scratch { down, up, ramp, ramp_width, same, values, members, .. } = scratch;
     terrace_neighbours(v, (w, h), q, same);
     // Distances to the risers down and up within each terrace.
     // Seeds: the pixels beside a riser down, and beside a riser up.
-    unreached([&mut *down, &mut *up], w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            // Left, up, right and down all in the pixel's terrace: no riser beside it.
-            if same[i] & 0b0101_0101 == 0b0101_0101 {
-                continue;
-            }
-            for (ok, j) in four_neighbours((x, y), (w, h)) {
-                match relation(v[i], if ok { v[j] } else { f32::NAN }, q) {
-                    Some(-1.0) => down[i] = 0.5,
-                    Some(1.0) => up[i] = 0.5,
-                    _ => {}
-                }
-            }
-        }
-    }
+    riser_seeds(v, (w, h), q, down, up);
     chamfer_pair((w, h), same, down, up);
     let mut out = std::mem::take(values);
     out.clear();
@@ -368,20 +357,36 @@ pub fn dequantise(range: &RangeImage, q: f64, scratch: &mut Scratch) -> RangeIma
     // A terrace with a riser on one side only (cut by the image border, no data or a jump; a ridge or a
     // valley): the ramp leaves its riser at the slope of the terrace beyond it, up to half a step away.
     for (dir, near, far) in [(-1.0, &*down, &*up), (1.0, &*up, &*down)] {
-        // Seeds: its pixels beside the riser, carrying the width of the terrace beyond where it has both risers.
-        let across = |i: usize, j: usize| {
-            let width = down[j] + up[j];
-            (far[i].is_infinite() && relation(v[i], v[j], q) == Some(dir) && width.is_finite())
-                .then_some(width)
-        };
-        // Only pixels beside the near riser, in terraces without a far one, can be seeds.
-        seed(v, (w, h), |i| near[i] != 0.5 || far[i].is_finite(), across, ramp, ramp_width);
-        // Only terraces without a riser on the far side take part (no other pixel has a seed in its terrace).
-        chamfer_carrying((w, h), same, ramp, ramp_width, far);
-        for (i, o) in out.iter_mut().enumerate() {
-            if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
+        // The pixels that can take part: reached from the near riser, in terraces without a far one (a few per cent
+        // of a frame). No other pixel is reached from a seed below: the seeds are pixels beside the near riser, and
+        // the passes are those that reached them from that riser.
+        members.clear();
+        members.extend((0..w * h).filter(|&i| near[i].is_finite() && far[i].is_infinite()).map(as_index));
+        unreached([&mut *ramp, &mut *ramp_width], w * h);
+        // Seeds: its pixels beside the riser, carrying the width of the terrace beyond where it has both risers
+        // (the smallest of those beside it, in the order left, right, up, down).
+        for i in members.iter().map(|&i| i as usize) {
+            let (x, y) = (i % w, i / w);
+            if near[i] != 0.5 || !v[i].is_finite() {
+                continue;
+            }
+            let width = four_neighbours((x, y), (w, h))
+                .into_iter()
+                .filter(|n| n.0)
+                .filter_map(|(_, j)| {
+                    let width = down[j] + up[j];
+                    (relation(v[i], v[j], q) == Some(dir) && width.is_finite()).then_some(width)
+                })
+                .reduce(f32::min);
+            if let Some(width) = width {
+                (ramp[i], ramp_width[i]) = (0.5, width);
+            }
+        }
+        chamfer_carrying(w, same, members, ramp, ramp_width);
+        for i in members.iter().map(|&i| i as usize) {
+            if ramp[i].is_finite() {
                 let rise = (f64::from(ramp[i]) / f64::from(ramp_width[i])).min(1.0);
-                *o = (f64::from(v[i]) + dir * q * (0.5 - rise)) as f32;
+                out[i] = (f64::from(v[i]) + dir * q * (0.5 - rise)) as f32;
             }
         }
     }
@@ -405,6 +410,63 @@ fn relation(a: f32, b: f32, q: f64) -> Option<f64> {
     }
 }
 
+/// Sets `down` and `up` (per pixel of `v`, `w × h`) to 0.5 at the pixels with a 4-neighbour one step below, and
+/// one step above, on a staircase of step `q` ([`relation`]: a riser lies between the two), +∞ elsewhere.
+fn riser_seeds(v: &[f32], (w, h): (usize, usize), q: f64, down: &mut Vec<f32>, up: &mut Vec<f32>) {
+    unreached([&mut *down, &mut *up], w * h);
+    // Compiled for each instruction set (`isa::dispatch`): subtractions and comparisons only, the same bits on each.
+    isa::dispatch(
+        #[inline(always)]
+        || riser_seeds_kernel(v, (w, h), q, down, up),
+    );
+}
+
+/// [`riser_seeds`]' body, compiled for each instruction set ([`isa::dispatch`]).
+#[inline(always)]
+fn riser_seeds_kernel(v: &[f32], (w, h): (usize, usize), q: f64, down: &mut [f32], up: &mut [f32]) {
+    let (half, one_half) = (0.5 * q, 1.5 * q);
+    // [`relation`] without branches: whether `b` lies one step below `a`, and one step above (never for NaN).
+    let riser = |a: f32, b: f32| {
+        let d = f64::from(b) - f64::from(a);
+        let step = (half..one_half).contains(&d.abs());
+        (step & (d < 0.0), step & (d > 0.0))
+    };
+    let seed = |(below, above): (bool, bool)| {
+        (if below { 0.5 } else { f32::INFINITY }, if above { 0.5 } else { f32::INFINITY })
+    };
+    let at = |i: usize, neighbours: [(bool, usize); 4]| {
+        let (mut below, mut above) = (false, false);
+        for (ok, j) in neighbours {
+            let (b, a) = if ok { riser(v[i], v[j]) } else { (false, false) };
+            (below, above) = (below | b, above | a);
+        }
+        seed((below, above))
+    };
+    for y in 0..h {
+        if y == 0 || y + 1 == h || w < 3 {
+            for x in 0..w {
+                let i = y * w + x;
+                (down[i], up[i]) = at(i, four_neighbours((x, y), (w, h)));
+            }
+            continue;
+        }
+        // Inside the image, each pixel has all four neighbours.
+        let (above, row, below) =
+            (&v[(y - 1) * w..y * w], &v[y * w..(y + 1) * w], &v[(y + 1) * w..(y + 2) * w]);
+        let (row_d, row_u) = (&mut down[y * w..(y + 1) * w], &mut up[y * w..(y + 1) * w]);
+        for x in 1..w - 1 {
+            let a = row[x];
+            let ((b0, a0), (b1, a1)) = (riser(a, row[x - 1]), riser(a, row[x + 1]));
+            let ((b2, a2), (b3, a3)) = (riser(a, above[x]), riser(a, below[x]));
+            (row_d[x], row_u[x]) = seed((b0 | b1 | b2 | b3, a0 | a1 | a2 | a3));
+        }
+        for x in [0, w - 1] {
+            let i = y * w + x;
+            (down[i], up[i]) = at(i, four_neighbours((x, y), (w, h)));
+        }
+    }
+}
+
 /// Makes each map `n` values of +∞ (no seed reached yet), reusing its memory.
 fn unreached(maps: [&mut Vec<f32>; 2], n: usize) {
     for m in maps {
@@ -421,54 +483,61 @@ fn four_neighbours((x, y): (usize, usize), (w, h): (usize, usize)) -> [(bool, us
     [(x > 0, i.wrapping_sub(1)), (x + 1 < w, i + 1), (y > 0, i.wrapping_sub(w)), (y + 1 < h, i + w)]
 }
 
-/// Sets `d` (per pixel of `v`, `w × h`) to 0.5 at the pixels (but those `skip` names) with a 4-neighbour `j` for
-/// which `riser(i, j)` gives a value (the riser lies between two pixels), +∞ elsewhere; `carried` gets that value
-/// (the smallest of the pixel's, in the order left, right, up, down) there, +∞ elsewhere.
-fn seed(
-    v: &[f32],
-    (w, h): (usize, usize),
-    skip: impl Fn(usize) -> bool,
-    riser: impl Fn(usize, usize) -> Option<f32>,
-    d: &mut Vec<f32>,
-    carried: &mut Vec<f32>,
-) {
-    unreached([&mut *d, &mut *carried], w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if skip(i) || !v[i].is_finite() {
-                continue;
-            }
-            let neighbours = four_neighbours((x, y), (w, h));
-            let value = neighbours.iter().filter(|n| n.0).filter_map(|&(_, j)| riser(i, j)).reduce(f32::min);
-            if let Some(value) = value {
-                d[i] = 0.5;
-                carried[i] = value;
-            }
-        }
-    }
-}
-
 /// Sets `same[i]` to the neighbours of pixel `i` (of `v`, `w × h`) that lie inside the image and in its terrace of a
 /// staircase of step `q` (values less than half a step apart; no data is in no terrace): bit 0 left, 1 up-left, 2
 /// up, 3 up-right, 4 right, 5 down-right, 6 down, 7 down-left.
 fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<u8>) {
     same.clear();
     same.resize(w * h, 0);
-    // The relation is symmetric: each pair is tested once, from its first pixel in raster order, and marks both.
-    // Offsets to the right, down-right, down and down-left neighbours; the first pixel's bit, then the second's.
-    let pairs = [(1, 4, 0), (w + 1, 5, 1), (w, 6, 2), (w.saturating_sub(1), 7, 3)];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let inside = [x + 1 < w, y + 1 < h && x + 1 < w, y + 1 < h, y + 1 < h && x > 0];
-            for (&(k, mine, theirs), inside) in pairs.iter().zip(inside) {
-                if inside && relation(v[i], v[i + k], q) == Some(0.0) {
-                    same[i] |= 1 << mine;
-                    same[i + k] |= 1 << theirs;
-                }
+    // Compiled for each instruction set (`isa::dispatch`): subtractions and comparisons only, the same bits on each.
+    isa::dispatch(
+        #[inline(always)]
+        || terrace_neighbours_kernel(v, (w, h), q, same),
+    );
+}
+
+/// [`terrace_neighbours`]' body, compiled for each instruction set ([`isa::dispatch`]).
+#[inline(always)]
+fn terrace_neighbours_kernel(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut [u8]) {
+    let half = 0.5 * q;
+    // Each pixel tests its own eight neighbours, without branches: the relation is symmetric (`|b − a|` and
+    // `|a − b|` round alike), so both pixels of a pair agree.
+    let level = |a: f32, b: f32| u8::from((f64::from(b) - f64::from(a)).abs() < half);
+    // Bit k's neighbour offset (dx, dy).
+    const OFFSETS: [(isize, isize); 8] =
+        [(-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1)];
+    let at_border = |x: usize, y: usize, same: &mut [u8]| {
+        let a = v[y * w + x];
+        let mut bits = 0;
+        for (k, (dx, dy)) in OFFSETS.into_iter().enumerate() {
+            let (nx, ny) = (x.wrapping_add_signed(dx), y.wrapping_add_signed(dy));
+            if nx < w && ny < h {
+                bits |= level(a, v[ny * w + nx]) << k;
             }
         }
+        same[y * w + x] = bits;
+    };
+    for y in 0..h {
+        if y == 0 || y + 1 == h || w < 3 {
+            (0..w).for_each(|x| at_border(x, y, same));
+            continue;
+        }
+        let (above, row, below) =
+            (&v[(y - 1) * w..y * w], &v[y * w..(y + 1) * w], &v[(y + 1) * w..(y + 2) * w]);
+        let out = &mut same[y * w..(y + 1) * w];
+        for x in 1..w - 1 {
+            let a = row[x];
+            out[x] = level(a, row[x - 1])
+                | level(a, above[x - 1]) << 1
+                | level(a, above[x]) << 2
+                | level(a, above[x + 1]) << 3
+                | level(a, row[x + 1]) << 4
+                | level(a, below[x + 1]) << 5
+                | level(a, below[x]) << 6
+                | level(a, below[x - 1]) << 7;
+        }
+        at_border(0, y, same);
+        at_border(w - 1, y, same);
     }
 }
 
@@ -477,62 +546,80 @@ fn terrace_neighbours(v: &[f32], (w, h): (usize, usize), q: f64, same: &mut Vec<
 /// seed distance plus path length. Two forward and backward passes: exact on terraces convex enough, an upper bound
 /// on the others.
 fn chamfer_pair((w, h): (usize, usize), same: &[u8], down: &mut [f32], up: &mut [f32]) {
-    for _ in 0..2 {
-        chamfer_pair_pass::<true>((w, h), same, down, up);
-        chamfer_pair_pass::<false>((w, h), same, down, up);
-    }
+    // Compiled for each instruction set (`isa::dispatch`): additions and comparisons only, the same bits on each.
+    isa::dispatch(
+        #[inline(always)]
+        || {
+            for _ in 0..2 {
+                chamfer_pair_pass::<true>((w, h), same, down, up);
+                chamfer_pair_pass::<false>((w, h), same, down, up);
+            }
+        },
+    );
 }
 
 /// One pass of [`chamfer_pair`]: forward (rows top down, left to right, from the left and the row above: bits 0–3 of
 /// [`terrace_neighbours`]), or backward, the same on the image turned half a turn (bits 4–7).
+#[inline(always)] // into `isa::dispatch` in `chamfer_pair`
 fn chamfer_pair_pass<const FORWARD: bool>(
     (w, h): (usize, usize),
     same: &[u8],
     down: &mut [f32],
     up: &mut [f32],
 ) {
-    // Distances are never NaN: the shortest of the paths, whatever their order.
-    let relax = |best: &mut f32, through: f32| {
-        if through < *best {
-            *best = through;
-        }
-    };
+    // A step to a neighbour outside the pixel's terrace costs +∞; distances are never NaN (+∞ or at least 0.5), so
+    // `min` without branches takes the shortest of the paths, whatever their order.
+    let cost = |bits: u8, bit: u32, step: f32| if bits & (1 << bit) != 0 { step } else { f32::INFINITY };
+    let min = |a: f32, b: f32| if b < a { b } else { a };
+    let shift = if FORWARD { 0 } else { 4 };
     for n in 0..h {
         let y = if FORWARD { n } else { h - 1 - n };
         let ((row_d, prev_d), (row_u, prev_u)) =
             (split_rows::<FORWARD>(down, y, w), split_rows::<FORWARD>(up, y, w));
-        for m in 0..w {
-            let x = if FORWARD { m } else { w - 1 - m };
-            // No data is in no terrace: its bits are 0.
-            let bits = if FORWARD { same[y * w + x] & 0xF } else { same[y * w + x] >> 4 };
-            if bits == 0 {
-                continue;
-            }
-            // The neighbour the pass has left behind in the row, and the one ahead of it in the previous row (the
-            // bits say which exist).
-            let (behind, ahead) =
-                if FORWARD { (x.wrapping_sub(1), x + 1) } else { (x + 1, x.wrapping_sub(1)) };
-            let (mut d, mut u) = (row_d[x], row_u[x]);
-            // Bits 0–3: behind in the row, then behind, level and ahead in the previous row.
-            for (bit, ((in_row, at), step)) in [(true, behind), (false, behind), (false, x), (false, ahead)]
-                .into_iter()
-                .zip(STEPS)
-                .enumerate()
-            {
-                if bits & (1 << bit) != 0 {
-                    let (from_d, from_u) =
-                        if in_row { (row_d[at], row_u[at]) } else { (prev_d[at], prev_u[at]) };
-                    relax(&mut d, from_d + step);
-                    relax(&mut u, from_u + step);
+        let bits = &same[y * w..(y + 1) * w];
+        // From the previous row first (bits 1–3: behind, level and ahead), a row at a time: the pass leaves those
+        // values as they are. Forward, behind is x − 1 and ahead x + 1; backward the other way round. The pixels
+        // at the row's ends have no neighbour beyond it (their bits say so).
+        if !prev_d.is_empty() {
+            let from_prev = |x: usize, behind: usize, ahead: usize, row: &mut [f32], prev: &[f32]| {
+                let b = bits[x] >> shift;
+                let (c1, c2, c3) = (cost(b, 1, STEPS[1]), cost(b, 2, STEPS[2]), cost(b, 3, STEPS[3]));
+                row[x] = min(min(min(row[x], prev[behind] + c1), prev[x] + c2), prev[ahead] + c3);
+            };
+            for (row, prev) in [(&mut *row_d, prev_d), (&mut *row_u, prev_u)] {
+                // The row's ends, whose neighbours beyond it do not exist (their bits are 0: any index will do).
+                for x in [0, w - 1] {
+                    let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                    let (behind, ahead) = if FORWARD { (left, right) } else { (right, left) };
+                    from_prev(x, behind, ahead, row, prev);
+                }
+                if w > 2 {
+                    let (b, r) = (&bits[1..w - 1], &mut row[1..w - 1]);
+                    let (pl, pc, pr) = (&prev[..w - 2], &prev[1..w - 1], &prev[2..]);
+                    let (pb, pa) = if FORWARD { (pl, pr) } else { (pr, pl) };
+                    for k in 0..w - 2 {
+                        let bk = b[k] >> shift;
+                        let (c1, c2, c3) =
+                            (cost(bk, 1, STEPS[1]), cost(bk, 2, STEPS[2]), cost(bk, 3, STEPS[3]));
+                        r[k] = min(min(min(r[k], pb[k] + c1), pc[k] + c2), pa[k] + c3);
+                    }
                 }
             }
-            (row_d[x], row_u[x]) = (d, u);
+        }
+        // Then along the row (bit 0: the pixel the pass has just left, already final).
+        let (mut last_d, mut last_u) = (f32::INFINITY, f32::INFINITY);
+        for m in 0..w {
+            let x = if FORWARD { m } else { w - 1 - m };
+            let c0 = cost(bits[x] >> shift, 0, STEPS[0]);
+            (last_d, last_u) = (min(row_d[x], last_d + c0), min(row_u[x], last_u + c0));
+            (row_d[x], row_u[x]) = (last_d, last_u);
         }
     }
 }
 
 /// Row `y` of `map` (rows of `w`), writable, and the row a pass came from: the one above going forward, the one below
 /// going backward (empty where there is none).
+#[inline(always)] // into `isa::dispatch` in `chamfer_pair`
 fn split_rows<const FORWARD: bool>(map: &mut [f32], y: usize, w: usize) -> (&mut [f32], &[f32]) {
     if FORWARD {
         let (above, rest) = map.split_at_mut(y * w);
@@ -549,36 +636,39 @@ fn split_rows<const FORWARD: bool>(map: &mut [f32], y: usize, w: usize) -> (&mut
 const STEPS: [f32; 4] = [1.0, std::f32::consts::SQRT_2, 1.0, std::f32::consts::SQRT_2];
 
 /// [`chamfer_pair`] for one distance map `map` that carries `values` from the seed it came from (the first neighbour,
-/// in the order of [`STEPS`], that offers a shorter path), where only pixels whose `far` distance is +∞ (terraces
-/// without a riser on the far side) take part.
-fn chamfer_carrying((w, h): (usize, usize), same: &[u8], map: &mut [f32], values: &mut [f32], far: &[f32]) {
+/// in the order of [`STEPS`], that offers a shorter path), over the pixels `members` only (in raster order, of
+/// an image `w` wide): `map` is +∞ at every other pixel.
+fn chamfer_carrying(w: usize, same: &[u8], members: &[u32], map: &mut [f32], values: &mut [f32]) {
     let offsets = [1, w + 1, w, w.saturating_sub(1)];
-    for _ in 0..2 {
-        for forward in [true, false] {
-            let shift = if forward { 0 } else { 4 };
-            for n in 0..w * h {
-                let i = if forward { n } else { w * h - 1 - n };
-                let bits = (same[i] >> shift) & 0xF;
-                if bits == 0 || far[i].is_finite() {
-                    continue;
-                }
-                let (mut best, mut src) = (map[i], usize::MAX);
-                for (b, &c) in STEPS.iter().enumerate() {
-                    if bits & (1 << b) != 0 {
-                        let j = if forward { i - offsets[b] } else { i + offsets[b] };
-                        let through = map[j] + c;
-                        if through < best {
-                            (best, src) = (through, j);
-                        }
-                    }
-                }
-                if src != usize::MAX {
-                    map[i] = best;
-                    values[i] = values[src];
+    let relax = |i: usize, forward: bool, map: &mut [f32], values: &mut [f32]| {
+        let bits = if forward { same[i] & 0xF } else { same[i] >> 4 };
+        if bits == 0 {
+            return;
+        }
+        let (mut best, mut src) = (map[i], usize::MAX);
+        for (b, &c) in STEPS.iter().enumerate() {
+            if bits & (1 << b) != 0 {
+                let j = if forward { i - offsets[b] } else { i + offsets[b] };
+                let through = map[j] + c;
+                if through < best {
+                    (best, src) = (through, j);
                 }
             }
         }
+        if src != usize::MAX {
+            map[i] = best;
+            values[i] = values[src];
+        }
+    };
+    for _ in 0..2 {
+        members.iter().for_each(|&i| relax(i as usize, true, map, values));
+        members.iter().rev().for_each(|&i| relax(i as usize, false, map, values));
     }
+}
+
+/// A pixel's index in a list of pixels (images are at most `u32::MAX` pixels: `rangeimage` refuses larger).
+fn as_index(i: usize) -> u32 {
+    u32::try_from(i).expect("an image of at most u32::MAX pixels")
 }
 
 #[cfg(test)]
@@ -797,6 +887,172 @@ mod tests {
             for (s, o) in v.iter().zip(out.as_slice()) {
                 assert!(s.is_nan() && o.is_nan() || (o - s).abs() <= 0.5 + 1e-4, "{w}×{h}: {s} became {o}");
             }
+        }
+    }
+
+    /// [`dequantise`] as first written, pixel by pixel over the whole image: the oracle its faster passes must match
+    /// bit for bit (the seeds of every map from all four neighbours, both chamfer rounds over every pixel, the ramps'
+    /// passes over every pixel of a terrace without a far riser).
+    fn reference(v: &[f32], (w, h): (usize, usize), q: f64) -> Vec<f32> {
+        let idx = |x: usize, y: usize| y * w + x;
+        let inside = |x: isize, y: isize| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h;
+        // [left, up-left, up, up-right, right, down-right, down, down-left]
+        let dirs: [(isize, isize); 8] =
+            [(-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1)];
+        let four = [(-1, 0), (1, 0), (0, -1), (0, 1)];
+        let neighbour = |i: usize, (dx, dy): (isize, isize)| {
+            let (x, y) = ((i % w) as isize + dx, (i / w) as isize + dy);
+            inside(x, y).then(|| idx(x as usize, y as usize))
+        };
+        let same =
+            |i: usize, k: usize| neighbour(i, dirs[k]).filter(|&j| relation(v[i], v[j], q) == Some(0.0));
+        // Chamfer rounds over every pixel: forward from bits 0–3, backward from 4–7, each carrying `values`
+        // from the first neighbour (in bit order) that offers a shorter path; `takes_part` pixels only.
+        let chamfer = |map: &mut Vec<f32>, values: &mut Vec<f32>, takes_part: &dyn Fn(usize) -> bool| {
+            for _ in 0..2 {
+                for forward in [true, false] {
+                    let order: Vec<usize> =
+                        if forward { (0..w * h).collect() } else { (0..w * h).rev().collect() };
+                    for i in order {
+                        if !takes_part(i) {
+                            continue;
+                        }
+                        let (mut best, mut src) = (map[i], None);
+                        for (b, &c) in STEPS.iter().enumerate() {
+                            if let Some(j) = same(i, if forward { b } else { b + 4 })
+                                && map[j] + c < best
+                            {
+                                (best, src) = (map[j] + c, Some(j));
+                            }
+                        }
+                        if let Some(j) = src {
+                            map[i] = best;
+                            values[i] = values[j];
+                        }
+                    }
+                }
+            }
+        };
+        let seeds = |dir: f64| -> Vec<f32> {
+            (0..w * h)
+                .map(|i| {
+                    let riser = four
+                        .iter()
+                        .any(|&d| neighbour(i, d).is_some_and(|j| relation(v[i], v[j], q) == Some(dir)));
+                    if riser { 0.5 } else { f32::INFINITY }
+                })
+                .collect()
+        };
+        let (mut down, mut up) = (seeds(-1.0), seeds(1.0));
+        let mut unused = vec![0.0; w * h];
+        chamfer(&mut down, &mut unused, &|_| true);
+        chamfer(&mut up, &mut unused, &|_| true);
+        let mut out: Vec<f32> = (0..w * h)
+            .map(|i| {
+                if down[i].is_finite() && up[i].is_finite() {
+                    (f64::from(v[i]) + q * (f64::from(down[i]) / f64::from(down[i] + up[i]) - 0.5)) as f32
+                } else {
+                    v[i]
+                }
+            })
+            .collect();
+        for (dir, near, far) in [(-1.0, &down, &up), (1.0, &up, &down)] {
+            let (mut ramp, mut width) = (vec![f32::INFINITY; w * h], vec![f32::INFINITY; w * h]);
+            for i in 0..w * h {
+                if near[i] != 0.5 || far[i].is_finite() || !v[i].is_finite() {
+                    continue;
+                }
+                let beyond = four
+                    .iter()
+                    .filter_map(|&d| neighbour(i, d))
+                    .filter(|&j| relation(v[i], v[j], q) == Some(dir) && (down[j] + up[j]).is_finite())
+                    .map(|j| down[j] + up[j])
+                    .reduce(f32::min);
+                if let Some(b) = beyond {
+                    (ramp[i], width[i]) = (0.5, b);
+                }
+            }
+            chamfer(&mut ramp, &mut width, &|i| far[i].is_infinite());
+            for i in 0..w * h {
+                if near[i].is_finite() && far[i].is_infinite() && ramp[i].is_finite() {
+                    let rise = (f64::from(ramp[i]) / f64::from(width[i])).min(1.0);
+                    out[i] = (f64::from(v[i]) + dir * q * (0.5 - rise)) as f32;
+                }
+            }
+        }
+        out
+    }
+
+    /// A staircase of step `q` for the property tests: planes of random slopes in random bands, with ridges, valleys,
+    /// jumps and no data, rounded to steps of `q` (the size, planes and holes from `seed`).
+    fn random_staircase(w: u32, h: u32, seed: u64, q: f64) -> RangeImage {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = move || {
+            // xorshift64*: deterministic and portable.
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let planes: Vec<[f64; 3]> =
+            (0..4).map(|_| [next() * 40.0, next() * 0.8 - 0.4, next() * 0.8 - 0.4]).collect();
+        let (cut_x, cut_y, hole) = (next() * f64::from(w), next() * f64::from(h), next() * 0.15);
+        let hole_seed = (next() * 1000.0) as u32;
+        Grid::from_fn(w, h, |x, y| {
+            let (fx, fy) = (f64::from(x), f64::from(y));
+            let k = usize::from(fx > cut_x) + 2 * usize::from(fy > cut_y + 0.3 * (fx - cut_x));
+            let [c, a, b] = planes[k];
+            // A roof: the slope turns at the middle of the band (a ridge or a valley).
+            let z = c + a * (fx - cut_x).abs() + b * fy;
+            let dropped = f64::from((x * 7919 + y * 104_729 + hole_seed) % 1000) < hole * 1000.0;
+            if dropped { f32::NAN } else { ((z / q).round() * q) as f32 }
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config {
+            cases: 96,
+            rng_seed: proptest::test_runner::RngSeed::Fixed(7),
+            failure_persistence: None,
+            ..proptest::test_runner::Config::default()
+        })]
+
+        /// The faster passes (seeds from rows, chamfer rows at a time, the ramps over their members only) give the
+        /// reference's bits on random staircases, from single pixels to ragged frames with holes and jumps.
+        #[test]
+        fn dequantise_matches_the_pixel_by_pixel_reference(
+            w in 0u32..48,
+            h in 0u32..40,
+            seed in proptest::prelude::any::<u64>(),
+            q in proptest::prelude::prop_oneof![proptest::prelude::Just(1.0), proptest::prelude::Just(0.25), proptest::prelude::Just(3.0)],
+        ) {
+            let img = random_staircase(w, h, seed, q);
+            let expected = reference(img.as_slice(), (w as usize, h as usize), q);
+            let got = dequantised(&img, q);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            proptest::prop_assert_eq!(bits(got.as_slice()), bits(&expected));
+        }
+    }
+
+    #[test]
+    fn every_instruction_set_dequantises_to_the_same_bits() {
+        // The passes run compiled for each instruction set of this CPU (isa::dispatch).
+        let img = random_staircase(97, 61, 11, 1.0);
+        let floor = kinect_floor(0.0, 0.0002, true);
+        let run = || {
+            let mut scratch = Scratch::default();
+            let a = dequantise(&img, 1.0, &mut scratch).into_vec();
+            let b =
+                disparity_staircase(&floor, &mut Vec::new(), &mut scratch).expect("a disparity staircase");
+            let b = b.dequantised.expect("dequantised").1.into_vec();
+            (
+                a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                b.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        let baseline = isa::with_isa(isa::Isa::Baseline, run).expect("baseline");
+        for other in isa::Isa::available() {
+            assert!(isa::with_isa(other, run).expect("available") == baseline, "{} differs", other.name());
         }
     }
 }
