@@ -154,11 +154,11 @@ pub fn for_config(
     let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
     let stairs = staircase(range, noise, screen);
     match stairs.step {
-        Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), sigma: None },
+        Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), ..Prepared::default() },
         // A pinhole frame may be a staircase of its inverse depth instead.
         None if matches!(camera, Camera::Pinhole { .. }) => disparity_staircase(range, noise, scratch)
-            .unwrap_or(Prepared { dequantised: None, sigma: stairs.sigma }),
-        None => Prepared { dequantised: None, sigma: stairs.sigma },
+            .unwrap_or(Prepared { sigma: stairs.sigma, ..Prepared::default() }),
+        None => Prepared { sigma: stairs.sigma, ..Prepared::default() },
     }
 }
 
@@ -275,7 +275,7 @@ fn disparity_staircase(range: &RangeImage, noise: &mut Vec<f64>, scratch: &mut S
     });
     let step = q * z * z;
     tracing::debug!(q, step, sigma, "disparity staircase: dequantised");
-    Some(Prepared { dequantised: Some((step, depth)), sigma: None })
+    Some(Prepared { dequantised: Some((step, depth)), sigma: None, inverse_depth: true })
 }
 
 /// The median of the valid depths of every [`SAMPLE_STRIDE`]-th pixel of every [`SAMPLE_STRIDE`]-th row; `z` is
@@ -309,6 +309,8 @@ pub struct Prepared {
     /// The σ the test read when it did not dequantise (for the working units, which read the same σ; `None` if
     /// the test read none).
     pub sigma: Option<f64>,
+    /// Whether the staircase dequantised was one of the inverse depth (a disparity's steps), not of the depth.
+    pub inverse_depth: bool,
 }
 
 /// The noise σ the working units take a dequantised image to have at least, as a share of its step's rounding

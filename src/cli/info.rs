@@ -96,20 +96,19 @@ fn describe(path: &std::path::Path, f: &Frame) -> String {
     let est = planefit::noise::estimate(&f.range);
     let noise = if est.sigma.is_finite() {
         let step = est.step.map_or_else(|| "continuous".to_string(), |q| format!("step {q:.4}"));
-        // What `segment` does with it (with `pipeline.dequantise` on, as by default).
-        let stairs = rangeseg::dequantise::staircase(&f.range, &mut Vec::new(), false).step.is_some();
+        // What `segment` does with it (the default configuration: `pipeline.dequantise` on).
+        let prepared = rangeseg::dequantise::for_config(
+            &f.range,
+            &f.camera,
+            &rangeseg::Config::default(),
+            &mut Vec::new(),
+            &mut rangeseg::dequantise::Scratch::default(),
+        );
         // A pinhole frame that is no staircase of its depth may be one of its inverse depth (a disparity's steps).
-        let disparity = !stairs
-            && matches!(f.camera, Camera::Pinhole { .. })
-            && rangeseg::dequantise::for_config(
-                &f.range,
-                &f.camera,
-                &rangeseg::Config::default(),
-                &mut Vec::new(),
-                &mut rangeseg::dequantise::Scratch::default(),
-            )
-            .dequantised
-            .is_some();
+        let (stairs, disparity) = match prepared.dequantised {
+            Some(_) => (!prepared.inverse_depth, prepared.inverse_depth),
+            None => (false, false),
+        };
         let stairs = if stairs {
             "; a staircase (noise below the step's rounding): dequantised by segment"
         } else if disparity {
