@@ -106,7 +106,7 @@ const SCREEN_MARGIN: f64 = 1.5;
 const SCREEN_STRIDE: usize = 4 * SAMPLE_STRIDE;
 
 /// Whether `range`'s depth is a staircase (module docs). `noise` is the σ estimate's scratch memory. A caller
-/// that will not use the σ (an ABW image: its working units need none) asks for a `screen`: a coarse σ first,
+/// that will not use the σ (no working units: `pipeline.normalize_units` off) asks for a `screen`: a coarse σ first,
 /// which rules out a noisy image at a sixteenth of the cost (then [`Staircase::sigma`] is `None`).
 #[must_use]
 pub fn staircase(range: &RangeImage, noise: &mut Vec<f64>, screen: bool) -> Staircase {
@@ -150,8 +150,9 @@ pub fn for_config(
         (range.width() as usize / SAMPLE_STRIDE + 1) * (range.height() as usize / SAMPLE_STRIDE + 1);
     noise.clear();
     noise.reserve(windows);
-    // An ABW image's working units need no σ, nor do any without working units: screen first.
-    let screen = matches!(camera, Camera::Abw(_)) || !config.pipeline.normalize_units;
+    // Without working units nothing else reads the σ: screen first. (With them, every camera's read it, an ABW
+    // image's for its stretch across, and reuse the σ the test read.)
+    let screen = !config.pipeline.normalize_units;
     let stairs = staircase(range, noise, screen);
     match stairs.step {
         Some(q) => Prepared { dequantised: Some((q, dequantise(range, q, scratch))), ..Prepared::default() },
