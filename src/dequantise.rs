@@ -589,23 +589,23 @@ fn chamfer_pair_pass<const FORWARD: bool>(
                 let (c1, c2, c3) = (cost(b, 1, STEPS[1]), cost(b, 2, STEPS[2]), cost(b, 3, STEPS[3]));
                 row[x] = min(min(min(row[x], prev[behind] + c1), prev[x] + c2), prev[ahead] + c3);
             };
-            for (row, prev) in [(&mut *row_d, prev_d), (&mut *row_u, prev_u)] {
-                // The row's ends, whose neighbours beyond it do not exist (their bits are 0: any index will do).
-                for x in [0, w - 1] {
-                    let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                    let (behind, ahead) = if FORWARD { (left, right) } else { (right, left) };
-                    from_prev(x, behind, ahead, row, prev);
-                }
-                if w > 2 {
-                    let (b, r) = (&bits[1..w - 1], &mut row[1..w - 1]);
-                    let (pl, pc, pr) = (&prev[..w - 2], &prev[1..w - 1], &prev[2..]);
-                    let (pb, pa) = if FORWARD { (pl, pr) } else { (pr, pl) };
-                    for k in 0..w - 2 {
-                        let bk = b[k] >> shift;
-                        let (c1, c2, c3) =
-                            (cost(bk, 1, STEPS[1]), cost(bk, 2, STEPS[2]), cost(bk, 3, STEPS[3]));
-                        r[k] = min(min(min(r[k], pb[k] + c1), pc[k] + c2), pa[k] + c3);
-                    }
+            // The row's ends, whose neighbours beyond it do not exist (their bits are 0: any index will do).
+            for x in [0, w - 1] {
+                let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                let (behind, ahead) = if FORWARD { (left, right) } else { (right, left) };
+                from_prev(x, behind, ahead, row_d, prev_d);
+                from_prev(x, behind, ahead, row_u, prev_u);
+            }
+            if w > 2 {
+                // Both maps in one loop: each pixel's bits and costs are read once.
+                let (b, rd, ru) = (&bits[1..w - 1], &mut row_d[1..w - 1], &mut row_u[1..w - 1]);
+                let ((db, dc, da), (ub, uc, ua)) =
+                    (behind_level_ahead::<FORWARD>(prev_d), behind_level_ahead::<FORWARD>(prev_u));
+                for k in 0..w - 2 {
+                    let bk = b[k] >> shift;
+                    let (c1, c2, c3) = (cost(bk, 1, STEPS[1]), cost(bk, 2, STEPS[2]), cost(bk, 3, STEPS[3]));
+                    rd[k] = min(min(min(rd[k], db[k] + c1), dc[k] + c2), da[k] + c3);
+                    ru[k] = min(min(min(ru[k], ub[k] + c1), uc[k] + c2), ua[k] + c3);
                 }
             }
         }
@@ -618,6 +618,15 @@ fn chamfer_pair_pass<const FORWARD: bool>(
             (row_d[x], row_u[x]) = (last_d, last_u);
         }
     }
+}
+
+/// The previous row's neighbours of the pixels inside a row (`prev`, that row, at least 3 long): behind, level and
+/// ahead of each in the pass's direction, as three slices of its length less 2.
+#[inline(always)] // into `isa::dispatch` in `chamfer_pair`
+fn behind_level_ahead<const FORWARD: bool>(prev: &[f32]) -> (&[f32], &[f32], &[f32]) {
+    let n = prev.len();
+    let (left, level, right) = (&prev[..n - 2], &prev[1..n - 1], &prev[2..]);
+    if FORWARD { (left, level, right) } else { (right, level, left) }
 }
 
 /// Row `y` of `map` (rows of `w`), writable, and the row a pass came from: the one above going forward, the one below
