@@ -237,6 +237,45 @@ fn info_says_which_frame_is_a_staircase_of_its_inverse_depth() {
 }
 
 #[test]
+fn info_hints_at_the_byte_order_of_16_bit_pgm() {
+    // A tilted plane of 11-bit samples with a little noise (as NYU Depth v2's raw disparity), written in either
+    // byte order.
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, little: bool| {
+        let path = dir.path().join(name);
+        let mut bytes = b"P5\n64 48\n65535\n".to_vec();
+        for y in 0..48u16 {
+            for x in 0..64u16 {
+                let v = 800 + 3 * x + 2 * y + (x * 7 + y * 13) % 5;
+                bytes.extend(if little { v.to_le_bytes() } else { v.to_be_bytes() });
+            }
+        }
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let (little, big) = (write("little.pgm", true), write("big.pgm", false));
+    let info = |extra: &[&str], path: &std::path::Path| {
+        let mut args = vec!["info"];
+        args.extend_from_slice(extra);
+        let mut args: Vec<&std::ffi::OsStr> = args.iter().map(std::ffi::OsStr::new).collect();
+        args.push(path.as_os_str());
+        let o = rangeseg(&args);
+        assert!(o.status.success(), "{}", stderr_of(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let out = info(&[], &little);
+    assert!(
+        out.contains("hint") && out.contains("times smoother") && out.contains("--pgm-little-endian reads"),
+        "{out}"
+    );
+    for out in [info(&["--pgm-little-endian"], &little), info(&[], &big)] {
+        assert!(!out.contains("hint"), "{out}");
+    }
+    let out = info(&["--pgm-little-endian"], &big);
+    assert!(out.contains("hint") && out.contains("without --pgm-little-endian"), "{out}");
+}
+
+#[test]
 fn regions_and_edges_write_what_segment_grows_and_detects() {
     // Two frames `segment` prepares before its stages run: a staircase, which it dequantises, and a Kinect-like
     // frame with `configs/fast.toml`, which it decimates. `regions` and `edges` must prepare them alike.
