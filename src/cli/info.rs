@@ -153,9 +153,9 @@ fn byte_order_hint(f: &Frame, sigma: f64, little_endian: bool) -> String {
         } else {
             "--pgm-little-endian reads them so (NYU Depth v2's raw frames)"
         };
+        let smoother = if other > 0.0 { format!("{:.0} times", sigma / other) } else { "far".to_string() };
         format!(
-            "  hint    in the other byte order the samples are {:.0} times smoother (σ {other:.4}): {how}\n",
-            sigma / other.max(f64::MIN_POSITIVE)
+            "  hint    in the other byte order the samples are {smoother} smoother (σ {other:.4}): {how}\n"
         )
     } else {
         String::new()
