@@ -27,7 +27,9 @@ pub fn write_segmentation(
         .filter_map(|&(old, new)| regions.iter().find(|r| r.label == old).map(|r| (u32::from(new), r.normal)))
         .collect();
     rangeio::abw::write_normals(nor_path, &normals)?;
-    let (lost, lost_px) = ms_seg_cap_loss(labels, &mapping);
+    // `write_labels` keeps every region unless it had to choose the largest `MAX_REGIONS`.
+    let (lost, lost_px) =
+        if mapping.len() < rangeio::abw::MAX_REGIONS { (0, 0) } else { ms_seg_cap_loss(labels, &mapping) };
     if lost > 0 {
         tracing::warn!(
             "{}: the .ms-seg format holds at most 246 regions: {lost} of {} regions ({lost_px} px) are 0 in it; \
@@ -60,8 +62,9 @@ pub fn labels_png_path(seg_path: &Path) -> std::path::PathBuf {
 /// Regions (and their pixels) of `labels` that the `.ms-seg` written with `mapping` sets to 0.
 pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u64) {
     let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    let mut px = 0;
     if max <= labels.len() {
-        // Labels 1..n of a segmentation: per-label tables (no hashing per pixel).
+        // Labels 1..n of a segmentation: per-label tables (no hashing), updated once a run of one label.
         let mut kept = vec![false; max + 1];
         for &(l, _) in mapping {
             if let Some(k) = kept.get_mut(l as usize) {
@@ -69,23 +72,22 @@ pub fn ms_seg_cap_loss(labels: &LabelImage, mapping: &[(u32, u8)]) -> (usize, u6
             }
         }
         let mut lost = vec![false; max + 1];
-        let mut px = 0;
-        for &l in labels.as_slice() {
-            let out = l != 0 && !kept[l as usize];
-            lost[l as usize] |= out;
-            px += u64::from(out);
-        }
+        rangeio::abw::for_each_run(labels.as_slice(), |l, _, len| {
+            if l != 0 && !kept[l as usize] {
+                lost[l as usize] = true;
+                px += len as u64;
+            }
+        });
         return (lost.iter().filter(|&&x| x).count(), px);
     }
     let kept: std::collections::HashSet<u32> = mapping.iter().map(|&(l, _)| l).collect();
     let mut lost = std::collections::HashSet::new();
-    let mut px = 0;
-    for &l in labels.as_slice() {
+    rangeio::abw::for_each_run(labels.as_slice(), |l, _, len| {
         if l != 0 && !kept.contains(&l) {
             lost.insert(l);
-            px += 1;
+            px += len as u64;
         }
-    }
+    });
     (lost.len(), px)
 }
 

@@ -353,6 +353,10 @@ fn regions_beyond_the_ms_seg_cap_are_reported_and_kept_in_the_labels_png() {
     let img = image::open(out.join("board.labels.png")).unwrap().into_luma16();
     let labels: std::collections::BTreeSet<u16> = img.pixels().map(|p| p.0[0]).filter(|&l| l != 0).collect();
     assert_eq!(labels.len() as u64, final_regions);
+    // The pixels the cap dropped: labelled in the PNG, 0 in the `.ms-seg`.
+    let ms = rangeio::abw::read_labels(&out.join("board.ms-seg"), false).unwrap();
+    let lost = img.pixels().zip(ms.as_slice()).filter(|&(p, &m)| p.0[0] != 0 && m == 0).count() as u64;
+    assert_eq!(json["px_dropped_by_ms_seg_cap"].as_u64(), Some(lost));
 }
 
 /// `NAME.json`, the file `segment` writes last for an image (not `NAME.planes.json`).

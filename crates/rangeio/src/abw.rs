@@ -196,6 +196,9 @@ fn check_labels(raw: &Grid<u8>, path: &Path) -> Result<(), ReadError> {
     Ok(())
 }
 
+/// The most regions an 8-bit label file holds (labels 10..=255).
+pub const MAX_REGIONS: usize = 246;
+
 /// Writes a label image as an 8-bit ABW label file and returns the `(old, new)` label pairs kept.
 ///
 /// 0 stays 0. If every label is 0 or in `10..=255`, labels are written unchanged (the pairs map each
@@ -203,12 +206,12 @@ fn check_labels(raw: &Grid<u8>, path: &Path) -> Result<(), ReadError> {
 /// appearance) are renumbered from 10 in raster order of first appearance and the rest set to 0;
 /// the pairs are sorted by new label (a debug event says how many regions were dropped; callers report it).
 pub fn write_labels(path: &Path, labels: &LabelImage) -> Result<Vec<(u32, u8)>, WriteError> {
-    let (raw, pairs) = labels_to_raw(labels);
-    let present = distinct_nonzero(labels);
-    if pairs.len() < present {
+    let stats = label_stats(labels);
+    let (raw, pairs) = raw_from_stats(labels, &stats);
+    if pairs.len() < stats.len() {
         tracing::debug!(
             path = %path.display(),
-            dropped = present - pairs.len(),
+            dropped = stats.len() - pairs.len(),
             kept = pairs.len(),
             "8-bit label file holds at most 246 regions: the smallest were set to 0"
         );
@@ -217,81 +220,71 @@ pub fn write_labels(path: &Path, labels: &LabelImage) -> Result<Vec<(u32, u8)>, 
     Ok(pairs)
 }
 
-/// The largest label of `labels` if it is at most the pixel count (a segmentation's labels 1..n, so per-label
-/// tables indexed by the label are no larger than the image), else `None`.
-fn dense_max(labels: &LabelImage) -> Option<usize> {
-    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
-    (max <= labels.len()).then_some(max)
-}
-
-/// The number of distinct non-zero labels.
-fn distinct_nonzero(labels: &LabelImage) -> usize {
-    match dense_max(labels) {
-        Some(max) => {
-            let mut seen = vec![false; max + 1];
-            for &l in labels.as_slice() {
-                seen[l as usize] = true;
-            }
-            seen[1..].iter().filter(|&&s| s).count()
-        }
-        None => {
-            labels.as_slice().iter().filter(|&&l| l != 0).collect::<std::collections::BTreeSet<_>>().len()
-        }
+/// Calls `f(label, start, length)` for each run of equal values of `labels`, in order (runs go on across rows).
+/// A segmentation's labels come in long runs, so per-label tables are updated once a run, not once a pixel.
+pub fn for_each_run(labels: &[u32], mut f: impl FnMut(u32, usize, usize)) {
+    let mut start = 0;
+    while let Some(&l) = labels.get(start) {
+        let len = labels[start..].iter().position(|&v| v != l).unwrap_or(labels.len() - start);
+        f(l, start, len);
+        start += len;
     }
 }
 
-/// `(label, pixel count, first pixel index)` of every non-zero label, by increasing label.
+/// `(label, pixel count, first pixel index)` of every non-zero label, by increasing label: in per-label tables
+/// when the largest label is at most the pixel count (a segmentation's labels 1..n), else in a map.
 fn label_stats(labels: &LabelImage) -> Vec<(u32, u64, usize)> {
-    if let Some(max) = dense_max(labels) {
+    let max = labels.as_slice().iter().copied().max().unwrap_or(0) as usize;
+    if max <= labels.len() {
         let mut t = vec![(0u64, 0usize); max + 1];
-        for (i, &l) in labels.as_slice().iter().enumerate() {
+        for_each_run(labels.as_slice(), |l, start, len| {
             let e = &mut t[l as usize];
             if e.0 == 0 {
-                e.1 = i;
+                e.1 = start;
             }
-            e.0 += 1;
-        }
+            e.0 += len as u64;
+        });
         return (1..=max).filter(|&l| t[l].0 > 0).map(|l| (l as u32, t[l].0, t[l].1)).collect();
     }
     // label -> (size, first appearance)
     let mut stats: BTreeMap<u32, (u64, usize)> = BTreeMap::new();
-    for (i, &l) in labels.as_slice().iter().enumerate() {
+    for_each_run(labels.as_slice(), |l, start, len| {
         if l != 0 {
-            stats.entry(l).or_insert((0, i)).0 += 1;
+            stats.entry(l).or_insert((0, start)).0 += len as u64;
         }
-    }
+    });
     stats.iter().map(|(&l, &(n, first))| (l, n, first)).collect()
 }
 
 /// The 8-bit encoding of [`write_labels`] without the file: values and `(old, new)` pairs.
 pub fn labels_to_raw(labels: &LabelImage) -> (Grid<u8>, Vec<(u32, u8)>) {
-    let fits = labels.as_slice().iter().all(|&l| l == 0 || (10..=255).contains(&l));
-    if fits {
-        let mut seen = [false; 256];
-        for &l in labels.as_slice() {
-            seen[l as usize] = true;
-        }
-        let pairs = (10..256u32).filter(|&l| seen[l as usize]).map(|l| (l, l as u8)).collect();
+    raw_from_stats(labels, &label_stats(labels))
+}
+
+/// [`labels_to_raw`] given the [`label_stats`] of `labels`.
+fn raw_from_stats(labels: &LabelImage, stats: &[(u32, u64, usize)]) -> (Grid<u8>, Vec<(u32, u8)>) {
+    // Every label 0 or in 10..=255: written unchanged.
+    if stats.iter().all(|&(l, _, _)| (10..=255).contains(&l)) {
+        let pairs = stats.iter().map(|&(l, _, _)| (l, l as u8)).collect();
         return (labels.map(|&l| l as u8), pairs);
     }
-    let mut by_size = label_stats(labels);
+    let mut by_size = stats.to_vec();
     by_size.sort_by(|a, b| b.1.cmp(&a.1).then(a.2.cmp(&b.2)));
-    by_size.truncate(246);
+    by_size.truncate(MAX_REGIONS);
     by_size.sort_by_key(|&(_, _, first)| first);
     let pairs: Vec<(u32, u8)> =
         by_size.iter().enumerate().map(|(i, &(l, _, _))| (l, (10 + i) as u8)).collect();
-    let raw = match dense_max(labels) {
-        Some(max) => {
-            let mut table = vec![0u8; max + 1];
-            for &(l, new) in &pairs {
-                table[l as usize] = new;
-            }
-            labels.map(|&l| table[l as usize])
+    // The largest label (the stats are by increasing label), as `label_stats` read it.
+    let max = stats.last().map_or(0, |&(l, _, _)| l as usize);
+    let raw = if max <= labels.len() {
+        let mut table = vec![0u8; max + 1];
+        for &(l, new) in &pairs {
+            table[l as usize] = new;
         }
-        None => {
-            let map: BTreeMap<u32, u8> = pairs.iter().copied().collect();
-            labels.map(|l| map.get(l).copied().unwrap_or(0))
-        }
+        labels.map(|&l| table[l as usize])
+    } else {
+        let map: BTreeMap<u32, u8> = pairs.iter().copied().collect();
+        labels.map(|l| map.get(l).copied().unwrap_or(0))
     };
     (raw, pairs)
 }

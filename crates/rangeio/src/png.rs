@@ -90,7 +90,7 @@ pub fn write_label16_png(path: &Path, labels: &LabelImage) -> Result<(), WriteEr
             what: format!("label {big} in a 16-bit label png (labels must be at most 65535)"),
         });
     }
-    write_gray16_png(path, &labels.map(|&l| l as u16))
+    encode_gray16(path, labels.width(), labels.height(), labels.as_slice(), |l| l as u16)
 }
 
 /// Writes an edge map as 8-bit gray: 255 = edge, 0 = not.
@@ -117,14 +117,28 @@ pub fn write_gray_png(path: &Path, img: &Grid<u8>) -> Result<(), WriteError> {
 
 /// Writes an 8-bit RGB PNG.
 pub fn write_rgb_png(path: &Path, img: &Grid<[u8; 3]>) -> Result<(), WriteError> {
-    let data: Vec<u8> = img.as_slice().iter().flatten().copied().collect();
-    encode(path, img.width(), img.height(), &data, ExtendedColorType::Rgb8)
+    encode(path, img.width(), img.height(), img.as_slice().as_flattened(), ExtendedColorType::Rgb8)
 }
 
 /// Writes a 16-bit gray PNG (e.g. depth in TUM units, or labels without the 8-bit cap).
 pub fn write_gray16_png(path: &Path, img: &Grid<u16>) -> Result<(), WriteError> {
-    let data: Vec<u8> = img.as_slice().iter().flat_map(|v| v.to_ne_bytes()).collect();
-    encode(path, img.width(), img.height(), &data, ExtendedColorType::L16)
+    encode_gray16(path, img.width(), img.height(), img.as_slice(), |v| v)
+}
+
+/// Encodes `values` (rows of `width`) as a 16-bit gray PNG of `sample(value)`, in the native byte order the
+/// encoder takes.
+fn encode_gray16<T: Copy>(
+    path: &Path,
+    width: u32,
+    height: u32,
+    values: &[T],
+    sample: impl Fn(T) -> u16,
+) -> Result<(), WriteError> {
+    let mut data = vec![0u8; 2 * values.len()];
+    for (d, &v) in data.chunks_exact_mut(2).zip(values) {
+        d.copy_from_slice(&sample(v).to_ne_bytes());
+    }
+    encode(path, width, height, &data, ExtendedColorType::L16)
 }
 
 #[cfg(test)]

@@ -168,4 +168,64 @@ proptest! {
         }
         prop_assert!(pairs.len() <= 246);
     }
+
+    /// The 8-bit encoding, read a run of labels at a time, is the pixel-by-pixel one (`reference_labels_to_raw`):
+    /// few labels (long runs), labels beyond 255 and beyond 246 regions, and labels above the pixel count.
+    #[test]
+    fn labels_to_raw_matches_the_pixel_by_pixel_encoding(
+        (w, h, data) in (1..40u32, 1..30u32).prop_flat_map(|(w, h)| {
+            (Just(w), Just(h), proptest::collection::vec(0..400u32, (w * h) as usize))
+        }),
+        (alphabet, offset, spread) in (prop_oneof![Just(3u32), Just(40), Just(400)], 0..12u32, prop_oneof![Just(1u32), Just(1_000_003)]),
+    ) {
+        // Labels from a small alphabet come in runs; `offset` moves them into or out of 10..=255.
+        let labels = Grid::from_vec(w, h, data.iter().map(|&v| {
+            let v = v % alphabet;
+            if v == 0 { 0 } else { v * spread + offset }
+        }).collect()).unwrap();
+        let (raw, pairs) = abw::labels_to_raw(&labels);
+        let (want_raw, want_pairs) = reference_labels_to_raw(&labels);
+        prop_assert_eq!(pairs, want_pairs);
+        prop_assert_eq!(raw.as_slice(), want_raw.as_slice());
+    }
+
+    /// `abw::for_each_run` visits maximal runs that tile the slice, in order.
+    #[test]
+    fn runs_tile_the_labels(v in proptest::collection::vec(0..4u32, 0..200)) {
+        let (mut next, mut prev) = (0, None);
+        abw::for_each_run(&v, |l, start, len| {
+            assert_eq!(start, next, "runs in order, without gaps");
+            assert!(len > 0 && v[start..start + len].iter().all(|&x| x == l), "a run of one label");
+            assert_ne!(prev, Some(l), "maximal: the next run has another label");
+            (next, prev) = (start + len, Some(l));
+        });
+        prop_assert_eq!(next, v.len());
+    }
+}
+
+/// `abw::labels_to_raw` as first written, a pixel at a time: labels 0 or in 10..=255 unchanged; otherwise the 246
+/// largest regions (ties: earlier first pixel) renumbered from 10 in raster order of their first pixel.
+fn reference_labels_to_raw(labels: &rangeimage::LabelImage) -> (Grid<u8>, Vec<(u32, u8)>) {
+    if labels.as_slice().iter().all(|&l| l == 0 || (10..=255).contains(&l)) {
+        let mut seen = [false; 256];
+        for &l in labels.as_slice() {
+            seen[l as usize] = true;
+        }
+        let pairs = (10..256u32).filter(|&l| seen[l as usize]).map(|l| (l, l as u8)).collect();
+        return (labels.map(|&l| l as u8), pairs);
+    }
+    let mut stats = std::collections::BTreeMap::<u32, (u64, usize)>::new();
+    for (i, &l) in labels.as_slice().iter().enumerate() {
+        if l != 0 {
+            stats.entry(l).or_insert((0, i)).0 += 1;
+        }
+    }
+    let mut by_size: Vec<(u32, u64, usize)> = stats.iter().map(|(&l, &(n, first))| (l, n, first)).collect();
+    by_size.sort_by(|a, b| b.1.cmp(&a.1).then(a.2.cmp(&b.2)));
+    by_size.truncate(246);
+    by_size.sort_by_key(|&(_, _, first)| first);
+    let pairs: Vec<(u32, u8)> =
+        by_size.iter().enumerate().map(|(i, &(l, _, _))| (l, (10 + i) as u8)).collect();
+    let raw = labels.map(|l| pairs.iter().find(|(old, _)| old == l).map_or(0, |&(_, new)| new));
+    (raw, pairs)
 }
